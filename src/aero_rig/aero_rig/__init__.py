@@ -1,0 +1,1 @@
+"""Bringup for the pitching-wing rig: graph descriptions, parameter files, ROS launch files, the aero-rig command line and the Rerun view."""

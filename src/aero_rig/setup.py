@@ -1,0 +1,32 @@
+"""ament_python package aero_rig (see package.xml)."""
+
+from glob import glob
+
+from setuptools import setup
+
+package_name = "aero_rig"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=[package_name],
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/launch", glob("launch/*.py") + glob("launch/*.yaml")),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+    ],
+    package_data={package_name: ["py.typed"]},
+    install_requires=['rig_runtime', 'multisine_gen', 'pitch_actuator', 'pressure_scanner', 'aero_identification', 'pyyaml>=6', 'tqdm>=4', 'rerun-sdk>=0.41'],
+    zip_safe=False,
+    maintainer="Pitching-wing rig maintainers",
+    maintainer_email="maintainers@pitching-wing.invalid",
+    description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
+    license="Apache-2.0",
+    python_requires=">=3.11",
+    entry_points={
+        "console_scripts": [
+            # ENTRY-POINTS aero_rig
+        ],
+    },
+)

@@ -1,0 +1,1 @@
+"""Excitation design (odd random-phase multisines, sines, experiment plans) and the pitch command generator node."""

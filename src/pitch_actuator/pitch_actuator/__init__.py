@@ -1,0 +1,1 @@
+"""Pitch actuator: shared safety layer, simulated actuator node and UDP hardware driver node."""
