@@ -1,0 +1,314 @@
+"""Cyclone DDS backend: ROS 2 wire conventions without ROS (DESIGN.md §3).
+
+- Topics are ``rt/<fully qualified name>``; types ``pkg::msg::dds_::Type_``, ``@final``,
+  generated from the rosbags Jazzy typestore (dds_types.py).
+- Samples are written as XCDR1 little-endian bytes from rosbags' ``serialize_cdr`` (the same
+  bytes the generated IdlStruct produces; tests check both) and read back with
+  ``deserialize_cdr``, so messages are the typestore's dataclasses with numpy sequences.
+- Every reader and writer carries ``typehash=RIHS01_<hex>;`` in USER_DATA, as rmw_cyclonedds
+  does in Jazzy.
+- Domain from ``ROS_DOMAIN_ID``. Default network: loopback only, unicast discovery, no
+  multicast. ``RIG_DDS_NETWORK=lan`` lets Cyclone pick the lab interface with multicast
+  discovery (like a stock ROS 2 install); ``CYCLONEDDS_URI`` (if set) wins over both.
+  ``RIG_DDS_MAX_PARTICIPANTS`` (default 32) bounds the unicast participant indices, i.e. how
+  many processes one domain holds on one host.
+"""
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from cyclonedds._clayer import ddspy_take, ddspy_write
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.core import (
+    DDSException,
+    GuardCondition,
+    InstanceState,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from .dds_types import idl_struct
+from .messages import deserialize, new_message, normalize_type_name, serialize, type_hash
+from .qos import QosProfile
+
+_ANY_STATE = SampleState.Any | ViewState.Any | InstanceState.Any
+_TAKE_BATCH = 256
+
+
+def domain_id() -> int:
+    text = os.environ.get("ROS_DOMAIN_ID", "0").strip() or "0"
+    try:
+        value = int(text)
+    except ValueError:
+        raise ValueError(f"ROS_DOMAIN_ID={text!r} is not an integer") from None
+    if not 0 <= value <= 232:
+        raise ValueError(f"ROS_DOMAIN_ID={value} is outside 0..232")
+    return value
+
+
+def cyclone_config() -> str | None:
+    """The Cyclone DDS XML configuration this process uses (None: CYCLONEDDS_URI applies)."""
+    if os.environ.get("CYCLONEDDS_URI"):
+        return None
+    network = os.environ.get("RIG_DDS_NETWORK", "loopback").strip().lower()
+    if network == "lan":
+        return None
+    if network != "loopback":
+        raise ValueError(f"RIG_DDS_NETWORK={network!r}: expected 'loopback' or 'lan'")
+    max_index = int(os.environ.get("RIG_DDS_MAX_PARTICIPANTS", "32"))
+    return (
+        '<CycloneDDS xmlns="https://cdds.io/config"><Domain Id="any">'
+        '<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
+        "<AllowMulticast>false</AllowMulticast></General>"
+        "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+        f"<MaxAutoParticipantIndex>{max_index}</MaxAutoParticipantIndex>"
+        '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+        '<Internal><SocketReceiveBufferSize min="4MB"/></Internal>'
+        "<Tracing><Verbosity>severe</Verbosity></Tracing>"
+        "</Domain></CycloneDDS>"
+    )
+
+
+def dds_qos(profile: QosProfile, type_name: str | None = None) -> Qos:
+    policies: list[Any] = [
+        Policy.Reliability.Reliable(max_blocking_time=duration(seconds=5))
+        if profile.reliability == "reliable"
+        else Policy.Reliability.BestEffort,
+        Policy.Durability.TransientLocal
+        if profile.durability == "transient_local"
+        else Policy.Durability.Volatile,
+        Policy.History.KeepAll if profile.keep_all else Policy.History.KeepLast(profile.depth),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+    ]
+    if profile.keep_all:
+        # Bounded memory even for keep-all: a full reader cache back-pressures the writer.
+        policies.append(Policy.ResourceLimits(max_samples=4096))
+    if type_name is not None:
+        policies.append(Policy.Userdata(data=f"typehash={type_hash(type_name)};".encode()))
+    return Qos(*policies)
+
+
+def profile_from_dds_qos(qos: Qos) -> QosProfile:
+    """Best-effort reconstruction of an offered profile from a discovered endpoint's QoS."""
+    reliability = "reliable"
+    durability = "volatile"
+    depth = 10
+    for policy in qos:
+        text = repr(policy)
+        if "BestEffort" in text:
+            reliability = "best_effort"
+        elif "TransientLocal" in text or "Transient" in text or "Persistent" in text:
+            durability = "transient_local"
+        elif "KeepAll" in text:
+            depth = 0
+        elif "KeepLast" in text:
+            depth = int(getattr(policy, "depth", depth))
+    return QosProfile(reliability, durability, depth)  # type: ignore[arg-type]
+
+
+_participants: dict[int, tuple[Domain | None, DomainParticipant]] = {}
+
+
+def participant() -> DomainParticipant:
+    """One participant per process and domain (each takes a unicast participant index)."""
+    did = domain_id()
+    if did not in _participants:
+        config = cyclone_config()
+        domain = Domain(did, config) if config else None
+        _participants[did] = (domain, DomainParticipant(did))
+    return _participants[did][1]
+
+
+@dataclass
+class DdsPublisher:
+    topic: str
+    type_name: str
+    writer: DataWriter
+
+    def publish(self, msg: Any) -> None:
+        data = serialize(msg)
+        pad = (-len(data)) % 4
+        if pad:
+            data += b"\0" * pad
+        ret = ddspy_write(self.writer._ref, data)
+        if ret < 0:
+            raise DDSException(ret, f"writing {self.type_name} on {self.topic}")
+
+    def publish_raw(self, data: bytes) -> None:
+        ret = ddspy_write(self.writer._ref, data)
+        if ret < 0:
+            raise DDSException(ret, f"writing {self.type_name} on {self.topic}")
+
+    def subscription_count(self) -> int:
+        return len(self.writer.get_matched_subscriptions())
+
+
+@dataclass
+class DdsSubscription:
+    topic: str
+    type_name: str
+    reader: DataReader
+    condition: ReadCondition
+    callback: Callable[[Any], None]
+    raw: bool
+
+    def publisher_count(self) -> int:
+        return len(self.reader.get_matched_publications())
+
+    def drain(self) -> int:
+        """Take every available sample and deliver it; returns how many were delivered."""
+        delivered = 0
+        while True:
+            batch = ddspy_take(self.reader._ref, _ANY_STATE, _TAKE_BATCH)
+            if isinstance(batch, int):
+                raise DDSException(batch, f"taking from {self.topic}")
+            for data, info in batch:
+                if not info.valid_data:  # dispose/unregister notifications carry no sample
+                    continue
+                if self.raw:
+                    self.callback((data, time.time_ns()))
+                else:
+                    self.callback(deserialize(data, self.type_name))
+                delivered += 1
+            if len(batch) < _TAKE_BATCH:
+                return delivered
+
+
+@dataclass
+class DdsTimer:
+    period_ns: int
+    callback: Callable[[], None]
+    next_ns: int
+    cancelled: bool = False
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+
+class DdsBackend:
+    """Single-threaded executor: one WaitSet over all readers, timers by deadline."""
+
+    name = "dds"
+
+    def __init__(self, node_name: str, namespace: str) -> None:
+        self.node_name = node_name
+        self.namespace = namespace
+        self.participant = participant()
+        self._topics: dict[tuple[str, str], Topic] = {}
+        self._subscriptions: list[DdsSubscription] = []
+        self._publishers: list[DdsPublisher] = []
+        self._timers: list[DdsTimer] = []
+        self._waitset = WaitSet(self.participant)
+        self._guard = GuardCondition(self.participant)
+        self._waitset.attach(self._guard)
+        self._discovery: BuiltinDataReader | None = None
+        self._discovered: dict[str, tuple[str, QosProfile | None]] = {}
+
+    def _topic(self, topic: str, type_name: str) -> Topic:
+        key = (topic, type_name)
+        if key not in self._topics:
+            self._topics[key] = Topic(self.participant, "rt" + topic, idl_struct(type_name))
+        return self._topics[key]
+
+    def create_publisher(self, topic: str, type_name: str, qos: QosProfile) -> DdsPublisher:
+        type_name = normalize_type_name(type_name)
+        writer = DataWriter(
+            self.participant, self._topic(topic, type_name), dds_qos(qos, type_name)
+        )
+        pub = DdsPublisher(topic, type_name, writer)
+        self._publishers.append(pub)
+        return pub
+
+    def create_subscription(
+        self,
+        topic: str,
+        type_name: str,
+        callback: Callable[[Any], None],
+        qos: QosProfile,
+        raw: bool = False,
+    ) -> DdsSubscription:
+        type_name = normalize_type_name(type_name)
+        reader = DataReader(
+            self.participant, self._topic(topic, type_name), dds_qos(qos, type_name)
+        )
+        condition = ReadCondition(reader, _ANY_STATE)
+        self._waitset.attach(condition)
+        sub = DdsSubscription(topic, type_name, reader, condition, callback, raw)
+        self._subscriptions.append(sub)
+        return sub
+
+    def create_timer(self, period_s: float, callback: Callable[[], None]) -> DdsTimer:
+        period_ns = int(period_s * 1e9)
+        timer = DdsTimer(period_ns, callback, time.monotonic_ns() + period_ns)
+        self._timers.append(timer)
+        return timer
+
+    def new_message(self, type_name: str, **fields: Any) -> Any:
+        return new_message(type_name, **fields)
+
+    def wake(self) -> None:
+        """Wake a blocked spin_once from another thread (drivers with receive threads)."""
+        self._guard.set(True)
+
+    def spin_once(self, timeout_s: float) -> None:
+        now = time.monotonic_ns()
+        timeout_ns = int(timeout_s * 1e9)
+        self._timers = [t for t in self._timers if not t.cancelled]
+        for timer in self._timers:
+            timeout_ns = min(timeout_ns, timer.next_ns - now)
+        if timeout_ns > 0:
+            self._waitset.wait(timeout_ns)
+        self._guard.set(False)
+        for sub in self._subscriptions:
+            sub.drain()
+        now = time.monotonic_ns()
+        for timer in list(self._timers):
+            if not timer.cancelled and timer.next_ns <= now:
+                timer.next_ns += timer.period_ns
+                if timer.next_ns <= now:  # skip missed periods instead of bursting
+                    timer.next_ns = now + timer.period_ns
+                timer.callback()
+
+    def now_ns(self) -> int:
+        return time.time_ns()
+
+    def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
+        """Topics with at least one writer in the domain, from DCPSPublication discovery."""
+        if self._discovery is None:
+            self._discovery = BuiltinDataReader(self.participant, BuiltinTopicDcpsPublication)
+        for sample in self._discovery.take(N=256):
+            topic_name = getattr(sample, "topic_name", None)
+            dds_type = getattr(sample, "type_name", None)
+            if not topic_name or not dds_type or not topic_name.startswith("rt/"):
+                continue
+            parts = dds_type.split("::")
+            if len(parts) != 4 or parts[2] != "dds_":
+                continue
+            ros_type = f"{parts[0]}/{parts[1]}/{parts[3].rstrip('_')}"
+            try:
+                profile = profile_from_dds_qos(sample.qos)
+            except Exception:
+                profile = None
+            self._discovered[topic_name[2:]] = (ros_type, profile)
+        return dict(self._discovered)
+
+    def close(self) -> None:
+        for sub in self._subscriptions:
+            try:
+                self._waitset.detach(sub.condition)
+            except DDSException:
+                pass
+        self._subscriptions.clear()
+        self._publishers.clear()
+        self._timers.clear()

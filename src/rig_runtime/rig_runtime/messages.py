@@ -1,0 +1,175 @@
+"""ROS 2 messages by type name, backed by the rosbags Jazzy typestore.
+
+One typestore (``rosbags.typesys.get_typestore(Stores.ROS2_JAZZY)``) is the single source of
+message definitions for the Cyclone DDS backend, the recorder and offline fits: messages are the
+typestore's dataclasses (numpy arrays for primitive sequences, nested dataclasses for headers),
+CDR bytes come from its ``serialize_cdr`` and type hashes from its ``hash_rihs01``.
+"""
+
+import dataclasses
+import functools
+from typing import Any
+
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Nodetype, Typestore
+
+_NUMPY_DTYPES = {
+    "bool": np.bool_,
+    "byte": np.uint8,
+    "char": np.uint8,
+    "int8": np.int8,
+    "uint8": np.uint8,
+    "int16": np.int16,
+    "uint16": np.uint16,
+    "int32": np.int32,
+    "uint32": np.uint32,
+    "int64": np.int64,
+    "uint64": np.uint64,
+    "float32": np.float32,
+    "float64": np.float64,
+}
+
+
+class MessageTypeError(ValueError):
+    """A message type name that the Jazzy typestore does not know."""
+
+
+@functools.cache
+def typestore() -> Typestore:
+    """The process-wide ROS 2 Jazzy typestore (common_interfaces and friends)."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def normalize_type_name(type_name: str) -> str:
+    """``'sensor_msgs/JointState'`` or ``'sensor_msgs/msg/JointState'`` -> the latter."""
+    parts = type_name.strip().strip("/").split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    name = "/".join(parts)
+    if name not in typestore().fielddefs:
+        raise MessageTypeError(
+            f"unknown message type {type_name!r}: the runtime knows the ROS 2 Jazzy "
+            "common_interfaces types (e.g. 'sensor_msgs/msg/JointState')"
+        )
+    return name
+
+
+def dds_type_name(type_name: str) -> str:
+    """DDS type name ROS 2 uses on the wire: ``sensor_msgs::msg::dds_::JointState_``."""
+    pkg, kind, name = normalize_type_name(type_name).split("/")
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+@functools.cache
+def type_hash(type_name: str) -> str:
+    """RIHS01 type hash of a message type (REP 2011), as ROS 2 Jazzy advertises it."""
+    return typestore().hash_rihs01(normalize_type_name(type_name))
+
+
+def _default_field(node: tuple[Any, Any]) -> Any:
+    nodetype, rest = node
+    if nodetype == Nodetype.BASE:
+        base = rest[0]
+        if base == "string":
+            return ""
+        if base == "bool":
+            return False
+        return 0.0 if base.startswith("float") else 0
+    if nodetype == Nodetype.NAME:
+        return new_message(rest)
+    sub, length = rest
+    if sub[0] == Nodetype.BASE and sub[1][0] in _NUMPY_DTYPES:
+        count = length if nodetype == Nodetype.ARRAY else 0
+        return np.zeros(count, dtype=_NUMPY_DTYPES[sub[1][0]])
+    if nodetype == Nodetype.ARRAY:
+        return [_default_field(sub) for _ in range(length)]
+    return []
+
+
+def new_message(type_name: str, **fields: Any) -> Any:
+    """A message of ``type_name`` with ROS defaults, fields overridden by keyword.
+
+    Primitive sequences are numpy arrays (assign any array-like; it is converted to the field's
+    dtype), nested messages are constructed with defaults (``msg.header.stamp.sec = 1``).
+    """
+    name = normalize_type_name(type_name)
+    _, fielddefs = typestore().fielddefs[name]
+    values: dict[str, Any] = {}
+    for field_name, node in fielddefs:
+        if field_name in fields:
+            values[field_name] = _coerce(node, fields.pop(field_name))
+        else:
+            values[field_name] = _default_field(node)
+    if fields:
+        raise TypeError(
+            f"{name} has no field(s) {sorted(fields)}; fields are {[f for f, _ in fielddefs]}"
+        )
+    return typestore().types[name](**values)
+
+
+def _coerce(node: tuple[Any, Any], value: Any) -> Any:
+    nodetype, rest = node
+    if nodetype in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+        sub = rest[0]
+        if sub[0] == Nodetype.BASE and sub[1][0] in _NUMPY_DTYPES:
+            return np.asarray(value, dtype=_NUMPY_DTYPES[sub[1][0]])
+        return list(value)
+    return value
+
+
+def _prepare(msg: Any) -> None:
+    """Make user-assigned fields serialisable: lists/scalars in primitive sequences -> numpy."""
+    name = msg.__msgtype__
+    _, fielddefs = typestore().fielddefs[name]
+    for field_name, node in fielddefs:
+        nodetype, rest = node
+        value = getattr(msg, field_name)
+        if nodetype == Nodetype.NAME:
+            _prepare(value)
+        elif nodetype in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+            sub = rest[0]
+            if sub[0] == Nodetype.BASE and sub[1][0] in _NUMPY_DTYPES:
+                dtype = _NUMPY_DTYPES[sub[1][0]]
+                if not (isinstance(value, np.ndarray) and value.dtype == dtype):
+                    setattr(msg, field_name, np.ascontiguousarray(value, dtype=dtype))
+            elif sub[0] == Nodetype.NAME:
+                for item in value:
+                    _prepare(item)
+
+
+def serialize(msg: Any) -> bytes:
+    """CDR (XCDR1, little endian, with the 4-byte encapsulation header) bytes of ``msg``."""
+    _prepare(msg)
+    return bytes(typestore().serialize_cdr(msg, msg.__msgtype__))
+
+
+def deserialize(data: bytes | memoryview, type_name: str) -> Any:
+    """Inverse of :func:`serialize`."""
+    return typestore().deserialize_cdr(data, normalize_type_name(type_name))
+
+
+def message_type_name(msg: Any) -> str:
+    """The ROS type name of a message object (``'sensor_msgs/msg/JointState'``)."""
+    return str(msg.__msgtype__)
+
+
+def to_dict(msg: Any) -> Any:
+    """A message as plain Python (dicts, lists, floats), e.g. for logging or JSON."""
+    if dataclasses.is_dataclass(msg):
+        return {f.name: to_dict(getattr(msg, f.name)) for f in dataclasses.fields(msg)}
+    if isinstance(msg, np.ndarray):
+        return msg.tolist()
+    if isinstance(msg, list):
+        return [to_dict(v) for v in msg]
+    return msg
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """``builtin_interfaces/Time`` -> integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def set_stamp(stamp: Any, t_ns: int) -> None:
+    """Write integer nanoseconds into a ``builtin_interfaces/Time`` in place."""
+    stamp.sec, stamp.nanosec = divmod(int(t_ns), 1_000_000_000)

@@ -1,0 +1,301 @@
+"""The node API every node of this project is written against (DESIGN.md §3).
+
+A node module declares its parameters and a class that takes a :class:`Node`::
+
+    PARAMETERS = [Parameter("fs", 200.0, "sample rate [Hz]", min=1.0)]
+
+    class Generator:
+        def __init__(self, node: Node) -> None:
+            self.pub = node.create_publisher("sensor_msgs/msg/JointState", "/pitch/command")
+            node.create_timer(1.0 / node.params["fs"], self.tick)
+
+    def main(argv=None) -> int:
+        return run_node(Generator, "generator", PARAMETERS, argv, description=__doc__)
+
+The backend is chosen once per process: rclpy when it imports (a ROS 2 machine), Cyclone DDS
+otherwise; ``RIG_RUNTIME_BACKEND=dds|rclpy`` overrides. Both speak ROS 2 on the wire.
+"""
+
+import logging
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
+
+from .messages import new_message as _new_message
+from .names import ArgumentError, RosArgs, normalize_namespace, parse_ros_args, resolve_name
+from .params import Parameter, ParameterError, ParameterSet, resolve_parameters
+from .qos import QosProfile, resolve_qos
+
+BACKEND_ENV = "RIG_RUNTIME_BACKEND"
+
+# Exit codes: 0 ok, 2 configuration error (bad parameters/arguments), 1 runtime failure.
+EXIT_CONFIG_ERROR = 2
+
+
+class Publisher(Protocol):
+    topic: str
+    type_name: str
+
+    def publish(self, msg: Any) -> None: ...
+
+    def subscription_count(self) -> int: ...
+
+
+class Subscription(Protocol):
+    topic: str
+    type_name: str
+
+
+class Timer(Protocol):
+    def cancel(self) -> None: ...
+
+
+class Backend(Protocol):
+    """What a middleware must provide; see dds_backend.py and rclpy_backend.py."""
+
+    name: str
+
+    def create_publisher(self, topic: str, type_name: str, qos: QosProfile) -> Publisher: ...
+
+    def create_subscription(
+        self,
+        topic: str,
+        type_name: str,
+        callback: Callable[[Any], None],
+        qos: QosProfile,
+        raw: bool = False,
+    ) -> Subscription: ...
+
+    def create_timer(self, period_s: float, callback: Callable[[], None]) -> Timer: ...
+
+    def new_message(self, type_name: str, **fields: Any) -> Any: ...
+
+    def spin_once(self, timeout_s: float) -> None: ...
+
+    def now_ns(self) -> int: ...
+
+    def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]: ...
+
+    def close(self) -> None: ...
+
+
+def select_backend_name() -> str:
+    choice = os.environ.get(BACKEND_ENV, "").strip().lower()
+    if choice in ("dds", "cyclonedds"):
+        return "dds"
+    if choice == "rclpy":
+        return "rclpy"
+    if choice:
+        raise ValueError(f"{BACKEND_ENV}={choice!r}: expected 'dds' or 'rclpy'")
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return "dds"
+    return "rclpy"
+
+
+def _make_backend(name: str, node_name: str, namespace: str) -> Backend:
+    if name == "rclpy":
+        from .rclpy_backend import RclpyBackend
+
+        return RclpyBackend(node_name, namespace)
+    from .dds_backend import DdsBackend
+
+    return DdsBackend(node_name, namespace)
+
+
+class Node:
+    """A named node with validated parameters, publishers, subscriptions and timers."""
+
+    def __init__(
+        self,
+        name: str,
+        parameters: Sequence[Parameter] = (),
+        argv: Sequence[str] | None = None,
+        namespace: str = "/",
+        backend: str | None = None,
+    ) -> None:
+        ros_args = parse_ros_args(list(sys.argv[1:] if argv is None else argv))
+        self.ros_args: RosArgs = ros_args
+        self.name = ros_args.node_name or name
+        self.namespace = normalize_namespace(ros_args.namespace or namespace)
+        prefix = "" if self.namespace == "/" else self.namespace
+        self.fq_name = f"{prefix}/{self.name}"
+        # Parameters are validated before any middleware entity exists (DESIGN.md §8).
+        self.params: ParameterSet = resolve_parameters(
+            parameters, self.fq_name, ros_args.param_files, ros_args.overrides
+        )
+        self.logger = _make_logger(self.fq_name, ros_args.log_level)
+        self.exit_code = 0
+        self._shutdown_requested = False
+        self._on_shutdown: list[Callable[[], None]] = []
+        self._backend = _make_backend(backend or select_backend_name(), self.name, self.namespace)
+
+    @property
+    def backend_name(self) -> str:
+        return self._backend.name
+
+    def resolve_topic(self, topic: str) -> str:
+        return resolve_name(topic, self.namespace, self.name, self.ros_args.remaps)
+
+    def create_publisher(
+        self,
+        type_name: str,
+        topic: str,
+        qos: str | QosProfile = "default",
+        depth: int | None = None,
+    ) -> Publisher:
+        return self._backend.create_publisher(
+            self.resolve_topic(topic), type_name, resolve_qos(qos, depth)
+        )
+
+    def create_subscription(
+        self,
+        type_name: str,
+        topic: str,
+        callback: Callable[[Any], None],
+        qos: str | QosProfile = "default",
+        depth: int | None = None,
+        raw: bool = False,
+    ) -> Subscription:
+        """Deliver messages of ``topic`` to ``callback`` on the spin thread.
+
+        ``raw=True`` delivers ``(cdr_bytes, receive_time_ns)`` instead of a message (recorder).
+        """
+        return self._backend.create_subscription(
+            self.resolve_topic(topic), type_name, callback, resolve_qos(qos, depth), raw
+        )
+
+    def create_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
+        if not period_s > 0:
+            raise ValueError(f"timer period must be > 0 s, got {period_s}")
+        return self._backend.create_timer(period_s, callback)
+
+    def new_message(self, type_name: str, **fields: Any) -> Any:
+        """A message by ROS type name, native to the backend (same attributes on both)."""
+        return self._backend.new_message(type_name, **fields)
+
+    def now_ns(self) -> int:
+        return self._backend.now_ns()
+
+    def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
+        """Topics seen in the graph: name -> (type name, offered QoS if known)."""
+        return self._backend.topic_types()
+
+    def on_shutdown(self, callback: Callable[[], None]) -> None:
+        self._on_shutdown.append(callback)
+
+    def request_shutdown(self, exit_code: int | None = None) -> None:
+        if exit_code is not None:
+            self.exit_code = exit_code
+        self._shutdown_requested = True
+
+    @property
+    def shutdown_requested(self) -> bool:
+        return self._shutdown_requested
+
+    def spin_once(self, timeout_s: float = 0.05) -> None:
+        self._backend.spin_once(timeout_s)
+
+    def spin(self) -> None:
+        while not self._shutdown_requested:
+            self._backend.spin_once(0.05)
+
+    def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        """Spin until ``predicate()`` is true (returns True) or the timeout passes (False)."""
+        deadline = time.monotonic() + timeout_s
+        while not predicate():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or self._shutdown_requested:
+                return predicate()
+            self._backend.spin_once(min(0.05, remaining))
+        return True
+
+    def close(self) -> None:
+        for callback in reversed(self._on_shutdown):
+            try:
+                callback()
+            except Exception:
+                self.logger.exception("shutdown callback failed")
+        self._on_shutdown.clear()
+        self._backend.close()
+
+
+def _make_logger(fq_name: str, level: str | None) -> logging.Logger:
+    logger = logging.getLogger(f"rig{fq_name.replace('/', '.')}")
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(
+            logging.Formatter(
+                f"[%(levelname)s] [%(created).3f] [{fq_name.lstrip('/')}]: %(message)s"
+            )
+        )
+        logger.addHandler(handler)
+        logger.propagate = False
+    logger.setLevel((level or os.environ.get("RIG_LOG_LEVEL", "INFO")).upper())
+    return logger
+
+
+def format_parameter_help(name: str, parameters: Sequence[Parameter], description: str) -> str:
+    lines = [
+        f"usage: {name} [--ros-args [-r __node:=NAME] [-r __ns:=NS] [-r FROM:=TO]",
+        "                 [--params-file FILE.yaml] [-p NAME:=VALUE] [--log-level LEVEL]]",
+        "",
+        (description or "").strip(),
+        "",
+        "parameters (set in a ROS 2 parameter file or with -p NAME:=VALUE):",
+    ]
+    for p in parameters:
+        lines.append(f"  {p.name} = {p.default!r}  ({p.describe_range()})")
+        lines.append(f"      {p.description}")
+    return "\n".join(lines)
+
+
+def run_node(
+    factory: Callable[[Node], Any],
+    name: str,
+    parameters: Sequence[Parameter],
+    argv: Sequence[str] | None = None,
+    description: str = "",
+) -> int:
+    """Parse arguments, validate parameters, build the node, spin until SIGINT/SIGTERM.
+
+    Returns the process exit code: 0 on a clean stop, 2 on a configuration error (message on
+    stderr naming the parameter), the node's ``exit_code`` otherwise.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    if any(a in ("-h", "--help") for a in args):
+        print(format_parameter_help(name, parameters, description))
+        return 0
+    try:
+        node = Node(name, parameters, args)
+    except (ParameterError, ArgumentError) as exc:
+        print(f"[FATAL] [{name}]: {exc}", file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+
+    def _stop(signum: int, _frame: Any) -> None:
+        node.logger.info("received %s, shutting down", signal.Signals(signum).name)
+        node.request_shutdown()
+
+    previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        try:
+            instance = factory(node)
+        except (ParameterError, ValueError) as exc:
+            print(f"[FATAL] [{node.fq_name}]: {exc}", file=sys.stderr)
+            return EXIT_CONFIG_ERROR
+        close = getattr(instance, "close", None)
+        if callable(close):
+            node.on_shutdown(close)
+        node.spin()
+    except Exception:
+        node.logger.exception("node failed")
+        node.exit_code = node.exit_code or 1
+    finally:
+        node.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return node.exit_code

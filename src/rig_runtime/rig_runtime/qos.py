@@ -1,0 +1,63 @@
+"""Named QoS profiles shared by both backends (DESIGN.md §3-§4).
+
+- ``default``: reliable, volatile, keep-last 10 (ROS 2's default profile).
+- ``sensor``: best effort, volatile, keep-last 5 (ROS 2's sensor-data profile).
+- ``latched``: reliable, transient-local, keep-last 1 (a late subscriber gets the last sample).
+- ``stream``: reliable, volatile, keep-all. For sample streams that must not lose a sample
+  (simulation, recording): a slow reader back-pressures the writer instead of dropping.
+  On the wire it is "reliable + volatile", so it matches ROS 2 default-QoS peers.
+- ``events``: reliable, volatile, keep-last 1000 ("reliable, deep": segment events).
+"""
+
+from dataclasses import dataclass, replace
+from typing import Literal
+
+Reliability = Literal["reliable", "best_effort"]
+Durability = Literal["volatile", "transient_local"]
+
+
+@dataclass(frozen=True)
+class QosProfile:
+    reliability: Reliability
+    durability: Durability
+    depth: int  # 0 = keep all
+
+    @property
+    def keep_all(self) -> bool:
+        return self.depth == 0
+
+    def to_rosbag_dict(self) -> dict[str, object]:
+        """The offered-QoS record rosbag2 writes into metadata.yaml."""
+        never = {"sec": 2147483647, "nsec": 4294967295}
+        return {
+            "history": 2 if self.keep_all else 1,  # rmw_qos_history_policy_e
+            "depth": self.depth,
+            "reliability": 1 if self.reliability == "reliable" else 2,
+            "durability": 1 if self.durability == "transient_local" else 2,
+            "deadline": dict(never),
+            "lifespan": dict(never),
+            "liveliness": 1,
+            "liveliness_lease_duration": dict(never),
+            "avoid_ros_namespace_conventions": False,
+        }
+
+
+PROFILES: dict[str, QosProfile] = {
+    "default": QosProfile("reliable", "volatile", 10),
+    "sensor": QosProfile("best_effort", "volatile", 5),
+    "latched": QosProfile("reliable", "transient_local", 1),
+    "stream": QosProfile("reliable", "volatile", 0),
+    "events": QosProfile("reliable", "volatile", 1000),
+}
+
+
+def resolve_qos(qos: str | QosProfile, depth: int | None = None) -> QosProfile:
+    """A profile by name (or as given), optionally with another history depth."""
+    if isinstance(qos, QosProfile):
+        profile = qos
+    else:
+        try:
+            profile = PROFILES[qos]
+        except KeyError:
+            raise ValueError(f"unknown QoS profile {qos!r}; known: {sorted(PROFILES)}") from None
+    return profile if depth is None else replace(profile, depth=depth)
