@@ -1,6 +1,7 @@
 """ament_python package aero_rig (see package.xml)."""
 
 from glob import glob
+from xml.etree import ElementTree
 
 from setuptools import setup
 
@@ -17,11 +18,20 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml")),
     ],
     package_data={package_name: ["py.typed"]},
-    install_requires=['rig_runtime', 'multisine_gen', 'pitch_actuator', 'pressure_scanner', 'aero_identification', 'pyyaml>=6', 'tqdm>=4', 'rerun-sdk>=0.41'],
+    install_requires=[
+        "rig_runtime",
+        "multisine_gen",
+        "pitch_actuator",
+        "pressure_scanner",
+        "aero_identification",
+        "pyyaml>=6",
+        "tqdm>=4",
+        "rerun-sdk>=0.41",
+    ],
     zip_safe=False,
     maintainer="Pitching-wing rig maintainers",
     maintainer_email="maintainers@pitching-wing.invalid",
-    description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
+    description=ElementTree.parse("package.xml").findtext("description"),
     license="Apache-2.0",
     python_requires=">=3.11",
     entry_points={

@@ -1,6 +1,7 @@
 """ament_python package rig_runtime (see package.xml)."""
 
 from glob import glob
+from xml.etree import ElementTree
 
 from setuptools import setup
 
@@ -27,7 +28,7 @@ setup(
     zip_safe=False,
     maintainer="Pitching-wing rig maintainers",
     maintainer_email="maintainers@pitching-wing.invalid",
-    description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
+    description=ElementTree.parse("package.xml").findtext("description"),
     license="Apache-2.0",
     python_requires=">=3.11",
     entry_points={

@@ -36,32 +36,31 @@ def parse_ros_args(argv: list[str]) -> RosArgs:
             in_ros = False
         elif not in_ros:
             result.user_args.append(arg)
-        else:
-            if arg in ("-r", "--remap", "-p", "--param", "--params-file", "--log-level"):
-                if i + 1 >= len(argv):
-                    raise ArgumentError(f"{arg} needs a value")
-                value = argv[i + 1]
-                i += 1
-                if arg == "--params-file":
-                    result.param_files.append(value)
-                elif arg == "--log-level":
-                    result.log_level = value.split(":=")[-1]
-                else:
-                    if ":=" not in value:
-                        raise ArgumentError(f"{arg} {value!r}: expected name:=value")
-                    key, val = value.split(":=", 1)
-                    if arg in ("-p", "--param"):
-                        result.overrides.append((key, val))
-                    elif key == "__node" or key == "__name":
-                        result.node_name = val
-                    elif key == "__ns":
-                        result.namespace = val
-                    else:
-                        result.remaps[key] = val
-            elif arg in ("--enclave", "-e"):
-                i += 1  # accepted for compatibility, no security here
+        elif arg in ("-r", "--remap", "-p", "--param", "--params-file", "--log-level"):
+            if i + 1 >= len(argv):
+                raise ArgumentError(f"{arg} needs a value")
+            value = argv[i + 1]
+            i += 1
+            if arg == "--params-file":
+                result.param_files.append(value)
+            elif arg == "--log-level":
+                result.log_level = value.split(":=")[-1]
             else:
-                raise ArgumentError(f"unknown ROS argument {arg!r}")
+                if ":=" not in value:
+                    raise ArgumentError(f"{arg} {value!r}: expected name:=value")
+                key, val = value.split(":=", 1)
+                if arg in ("-p", "--param"):
+                    result.overrides.append((key, val))
+                elif key in {"__node", "__name"}:
+                    result.node_name = val
+                elif key == "__ns":
+                    result.namespace = val
+                else:
+                    result.remaps[key] = val
+        elif arg in ("--enclave", "-e"):
+            i += 1  # accepted for compatibility, no security here
+        else:
+            raise ArgumentError(f"unknown ROS argument {arg!r}")
         i += 1
     return result
 

@@ -24,7 +24,6 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from .messages import new_message as _new_message
 from .names import ArgumentError, RosArgs, normalize_namespace, parse_ros_args, resolve_name
 from .params import Parameter, ParameterError, ParameterSet, resolve_parameters
 from .qos import QosProfile, resolve_qos

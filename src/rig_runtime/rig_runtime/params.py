@@ -7,6 +7,7 @@ and fully qualified ``/ns/node`` keys), then ``-p name:=value`` overrides, exact
 invalid raises :class:`ParameterError` before the node creates a publisher.
 """
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -90,7 +91,7 @@ class Parameter:
             if not isinstance(value, str):
                 raise self._error(whole, source)
         if kind in (int, float):
-            if value != value:  # NaN never passes a range check
+            if math.isnan(value):  # NaN never passes a range check
                 raise self._error(whole, source)
             if (self.min is not None and value < self.min) or (
                 self.max is not None and value > self.max
