@@ -11,6 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aero_identification.data import PeriodicData
+from aero_identification.lpm import frf_variance, lpm_periodic
+
 
 @dataclass(frozen=True, eq=False)
 class BLA:
@@ -89,3 +92,153 @@ class BLA:
         nonlinear distortion is detected)."""
         with np.errstate(divide="ignore"):
             return np.abs(self.G) ** 2 / self.var_nl
+
+
+def detection_lines(excited_lines: np.ndarray, max_line: int) -> tuple[np.ndarray, np.ndarray]:
+    """Odd and even non-excited lines of the excitation grid up to `max_line`.
+
+    The grid is the greatest common divisor g of the excited lines (g = 1 for the usual odd
+    multisine on odd bins). Harmonic h = k/g of a line k on the grid is odd or even; an odd
+    nonlinearity driven by odd harmonics only produces odd harmonics, an even one only even
+    harmonics (Pintelon & Schoukens 2012 §4.3.2), so non-excited odd-h lines show the odd
+    distortions and even-h lines the even ones. Lines off the grid carry noise only.
+
+    Returns:
+        (odd_lines, even_lines): int arrays of DFT bin indices, ascending.
+    """
+    excited = np.asarray(excited_lines, dtype=np.int64)
+    g = int(np.gcd.reduce(excited))
+    grid = np.arange(g, max_line + 1, g)
+    grid = grid[~np.isin(grid, excited)]
+    h = grid // g
+    return grid[h % 2 == 1], grid[h % 2 == 0]
+
+
+def estimate_bla(
+    data: PeriodicData,
+    method: str = "auto",
+    degree: int = 2,
+    n_per_side: int | None = None,
+    max_line: int | None = None,
+) -> BLA:
+    """Estimate the BLA, its noise and nonlinear-distortion variances and the output levels.
+
+    Methods:
+        "robust": Pintelon & Schoukens 2012 §4.3.1, formulas of DESIGN.md §7. Per period
+            G[m, p] = Y/U at the excited lines; G[m] = mean_p G[m, p]; G = mean_m G[m];
+            var_noise = (1/M²) Σ_m Σ_p |G[m,p] − G[m]|² / (P(P−1));
+            var_total = Σ_m |G[m] − G|² / (M(M−1)). Needs P ≥ 2 and M ≥ 2 and steady state
+            (drop transient periods first, see `transient_periods`).
+        "lpm": the Local Polynomial Method per realization (lpm.py) removes the transient and
+            estimates the noise variance from the non-periodic DFT bins of the whole record;
+            G[m] = Ȳ_m / Ū_m (transient-corrected period means) with its errors-in-variables
+            noise variance; G and var_total over realizations as above. With M == 1,
+            var_total = var_noise (nonlinear distortions cannot be told from one realization)
+            and var_nl = 0. Works with P == 1 (then the "noise" includes the nonlinear
+            distortions at the neighbouring non-excited lines).
+        "auto": "robust" when M ≥ 2 and P ≥ 2, otherwise "lpm".
+
+    Args:
+        data: periodic records (N, P, M).
+        method: "auto", "robust" or "lpm".
+        degree, n_per_side: LPM polynomial degree and neighbours per side (see lpm.py).
+        max_line: highest DFT line of the band for the odd/even/noise levels; default the
+            highest excited line.
+
+    Returns:
+        BLA (variances of the mean estimate; see the BLA docstring for the M, P factors).
+
+    Raises:
+        ValueError: for an unknown method, or "robust" with P < 2 or M < 2.
+    """
+    N, P, M = data.N, data.P, data.M
+    lines = data.excited_lines
+    if max_line is None:
+        max_line = int(lines.max())
+    if not int(lines.max()) <= max_line < (N + 1) // 2:
+        raise ValueError(
+            f"max_line must lie between the highest excited line {lines.max()} and "
+            f"{(N - 1) // 2}; got {max_line}"
+        )
+    if method == "auto":
+        method = "robust" if (M >= 2 and P >= 2) else "lpm"
+    if method not in ("robust", "lpm"):
+        raise ValueError(f'method must be "auto", "robust" or "lpm"; got {method!r}')
+    odd_lines, even_lines = detection_lines(lines, max_line)
+    band = np.arange(1, max_line + 1)
+
+    if method == "robust":
+        if P < 2 or M < 2:
+            raise ValueError(
+                f"the robust BLA needs at least 2 periods and 2 realizations (got P={P}, "
+                f'M={M}); use method="lpm" for a single realization or a single period'
+            )
+        U = data.U[lines]  # (F, P, M)
+        Y = data.Y[lines]
+        G_mp = Y / U
+        G_m = G_mp.mean(axis=1)  # (F, M)
+        var_noise = np.sum(np.abs(G_mp - G_m[:, None, :]) ** 2, axis=(1, 2)) / (M**2 * P * (P - 1))
+        U_mean = U.mean(axis=1)
+        Y_mean = Y.mean(axis=1)
+        # Levels of the period-averaged output spectrum over the band (Fig. 6 of the paper).
+        Y_band = data.Y[band]  # (K, P, M)
+        Y_band_mean = Y_band.mean(axis=1)
+        var_Y_band_mean = np.var(Y_band, axis=1, ddof=1).mean(axis=1) / P
+        noise_lines = band
+    else:
+        if P >= 2:
+            targets = band
+        else:
+            targets = lines  # single period: LPM only at the excited lines (see lpm.py)
+        res = lpm_periodic(data.u, data.y, targets, lines, degree=degree, n_per_side=n_per_side)
+        at_exc = np.searchsorted(targets, lines)
+        U_mean = res.U[at_exc]
+        Y_mean = res.Y[at_exc]
+        G_m = Y_mean / U_mean
+        var_G_m = frf_variance(
+            G_m, U_mean, res.var_U[at_exc], res.var_Y[at_exc], res.cov_YU[at_exc]
+        )
+        var_noise = var_G_m.sum(axis=1) / M**2
+        if P >= 2:
+            Y_band_mean = res.Y
+        else:
+            Y_band_mean = data.Y[band].mean(axis=1)
+        var_Y_band_mean = res.var_Y.mean(axis=1)
+        noise_lines = targets
+
+    G = G_m.mean(axis=1)
+    if M >= 2:
+        var_total = np.sum(np.abs(G_m - G[:, None]) ** 2, axis=1) / (M * (M - 1))
+    else:
+        var_total = var_noise.copy()
+    var_nl = np.maximum(var_total - var_noise, 0.0)
+
+    def level(k: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.mean(np.abs(Y_band_mean[k - 1]) ** 2, axis=1))
+
+    f0 = data.fs / N
+    return BLA(
+        fs=data.fs,
+        N=N,
+        lines=lines.copy(),
+        freq=lines * f0,
+        G=G,
+        var_noise=var_noise,
+        var_total=var_total,
+        var_nl=var_nl,
+        M=M,
+        P=P,
+        U_mean=U_mean,
+        Y_mean=Y_mean,
+        excited_level=np.sqrt(np.mean(np.abs(Y_mean) ** 2, axis=1)),
+        odd_lines=odd_lines,
+        odd_freq=odd_lines * f0,
+        odd_nl_level=level(odd_lines),
+        even_lines=even_lines,
+        even_freq=even_lines * f0,
+        even_nl_level=level(even_lines),
+        noise_lines=noise_lines,
+        noise_freq=noise_lines * f0,
+        noise_level=np.sqrt(var_Y_band_mean),
+        method=method,
+    )

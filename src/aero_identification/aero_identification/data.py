@@ -5,7 +5,7 @@ input u (pitch angle) and output y (lift coefficient). `PeriodicData` holds them
 shape (N, P, M) and provides what the nonparametric methods need: the period-wise DFTs, selection
 of periods (after clustering) and of realizations, and a transient check.
 
-DFT convention (Pintelon & Schoukens 2012, eq. 2-?; the "1/√N" scaling of their book):
+DFT convention (the 1/√N scaling of Pintelon & Schoukens 2012):
 
     U[k, p, m] = (1/√N) Σ_{t=0}^{N-1} u[t, p, m] exp(-j 2π k t / N),   k = 0 … N/2
 
@@ -232,3 +232,69 @@ class PeriodicData:
             period_index=self.period_index[n_periods:, :],
             realization_index=self.realization_index,
         )
+
+
+def transient_ratio(data: PeriodicData, n_ref: int = 2) -> np.ndarray:
+    """Power of each period's difference from the steady state, relative to the noise.
+
+    The last `n_ref` periods of each realization are taken as steady state: their mean is the
+    reference waveform and their period-to-period variance the noise variance σ² (pooled over
+    the samples of the period). For an earlier period p the ratio is
+
+        mean_t (x[t, p, m] − ref[t, m])² / (σ² (1 + 1/n_ref)),
+
+    whose expectation is 1 in steady state (the denominator is the variance of the difference of
+    a noisy period and the mean of n_ref noisy periods) and larger with a transient. It is
+    evaluated for the input and the output and the larger is returned.
+
+    Returns:
+        (P, M) ratios; the last `n_ref` rows (the reference periods) are NaN.
+
+    Raises:
+        ValueError: if there are fewer than n_ref + 1 periods or n_ref < 2.
+    """
+    if n_ref < 2:
+        raise ValueError(f"n_ref must be >= 2 to estimate the noise variance; got {n_ref}")
+    if data.P < n_ref + 1:
+        raise ValueError(
+            f"the transient check needs more periods than the {n_ref} reference periods; got "
+            f"P={data.P}. Record more periods or lower n_ref."
+        )
+    ratios = np.full((data.P, data.M), np.nan)
+    for x in (data.u, data.y):
+        tail = x[:, -n_ref:, :]
+        ref = tail.mean(axis=1)  # (N, M)
+        var_noise = np.var(tail, axis=1, ddof=1).mean(axis=0)  # (M,)
+        # Noise-free records (simulations) would divide by zero: floor at round-off level.
+        floor = 1e-24 * np.maximum(np.mean(x**2, axis=(0, 1)), 1e-300)
+        var_noise = np.maximum(var_noise, floor)
+        head = x[:, :-n_ref, :]
+        diff_power = np.mean((head - ref[:, None, :]) ** 2, axis=0)  # (P - n_ref, M)
+        r = diff_power / (var_noise * (1.0 + 1.0 / n_ref))
+        ratios[:-n_ref] = np.fmax(ratios[:-n_ref], r)
+    return ratios
+
+
+def transient_periods(data: PeriodicData, n_ref: int = 2, threshold: float = 2.0) -> int:
+    """Number of leading periods to drop because they still hold a start-up transient.
+
+    A period is transient when its `transient_ratio` exceeds `threshold` (default 2: the
+    difference from steady state carries as much power again as the noise; far above the
+    ≈ √(2/N) relative scatter of the ratio in steady state). The count returned is, over all
+    realizations, the first period index from which no earlier-than-reference period is
+    flagged any more, so dropping it (`PeriodicData.drop_leading`) leaves steady-state periods.
+
+    Returns:
+        int in 0 … P − n_ref.
+    """
+    if threshold <= 1.0:
+        raise ValueError(
+            f"threshold must exceed 1 (the expected ratio in steady state); got {threshold}"
+        )
+    flagged = transient_ratio(data, n_ref)[:-n_ref] > threshold  # (P - n_ref, M)
+    n_drop = 0
+    for m in range(data.M):
+        idx = np.flatnonzero(flagged[:, m])
+        if idx.size:
+            n_drop = max(n_drop, int(idx[-1]) + 1)
+    return n_drop
