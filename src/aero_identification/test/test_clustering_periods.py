@@ -1,0 +1,81 @@
+"""k-means clustering of periods: two flow regimes split, homogeneous periods stay together."""
+
+import numpy as np
+from aero_identification.clustering import period_clusters
+
+from aero_identification import PeriodicData, cluster_periods
+
+N = 400
+
+
+def regime_data(
+    rng: np.random.Generator, P: int, M: int, other_regime: set[tuple[int, int]], sigma: float
+) -> PeriodicData:
+    """Periodic lift-like output; periods (p, m) in `other_regime` follow a 'stalled' map."""
+    lines = np.arange(1, 40, 2)
+    u = np.empty((N, P, M))
+    y = np.empty((N, P, M))
+    for m in range(M):
+        X = np.zeros(N // 2 + 1, complex)
+        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
+        alpha = np.fft.irfft(X, N)
+        alpha /= alpha.std()
+        for p in range(P):
+            if (p, m) in other_regime:
+                cl = 0.6 * alpha - 0.5 + 0.3 * np.abs(alpha)  # lower slope, lift loss
+            else:
+                cl = alpha + 0.1 * alpha**3
+            u[:, p, m] = alpha
+            y[:, p, m] = cl + sigma * rng.standard_normal(N)
+    return PeriodicData(u, y, 10.0, lines)
+
+
+def test_two_regimes_split_and_dominant_kept() -> None:
+    rng = np.random.default_rng(1)
+    stalled = {(p, 0) for p in (1, 4, 6, 9, 10)}  # 5 of 12 periods, spread over time
+    data = regime_data(rng, P=12, M=1, other_regime=stalled, sigma=0.05)
+    labels, keep = cluster_periods(data)
+    expected_keep = np.array([(p, 0) not in stalled for p in range(12)])[:, None]
+    np.testing.assert_array_equal(keep, expected_keep)
+    np.testing.assert_array_equal(labels, np.where(expected_keep, 0, 1))
+    result = period_clusters(data)
+    assert result.k == 2 and result.sizes.tolist() == [7, 5] and result.dominant == 0
+    assert result.silhouette[2] == max(result.silhouette.values()) > 0.5
+    # Deterministic for the seed: the same call gives the same answer.
+    labels_again, _ = cluster_periods(data)
+    np.testing.assert_array_equal(labels_again, labels)
+    # keep is what select accepts: the model data are the 7 attached periods.
+    kept = data.select(keep)
+    assert kept.P == 7
+    np.testing.assert_array_equal(kept.period_index[:, 0], [0, 2, 3, 5, 7, 8, 11])
+
+
+def test_homogeneous_periods_stay_one_cluster() -> None:
+    rng = np.random.default_rng(2)
+    data = regime_data(rng, P=6, M=2, other_regime=set(), sigma=0.05)
+    result = period_clusters(data)
+    assert result.k == 1
+    assert np.all(result.keep) and np.all(result.labels == 0)
+    assert result.sizes.tolist() == [12]
+    # k-means did split (k = 2 … 6 were tried) but no split was real.
+    assert result.silhouette and max(result.silhouette.values()) < 0.5
+
+
+def test_regimes_across_realizations_are_matched_not_split_by_realization() -> None:
+    rng = np.random.default_rng(3)
+    stalled = {(4, 0), (5, 0), (1, 1)}
+    data = regime_data(rng, P=6, M=2, other_regime=stalled, sigma=0.05)
+    _, keep = cluster_periods(data)
+    expected = np.ones((6, 2), dtype=bool)
+    for p, m in stalled:
+        expected[p, m] = False
+    np.testing.assert_array_equal(keep, expected)
+    kept = data.select(keep)
+    assert (kept.P, kept.M) == (4, 2)  # truncated to the same count per realization
+
+
+def test_identical_periods_without_noise_are_one_cluster() -> None:
+    rng = np.random.default_rng(4)
+    data = regime_data(rng, P=4, M=1, other_regime=set(), sigma=0.0)
+    result = period_clusters(data)
+    assert result.k == 1 and np.all(result.keep)
