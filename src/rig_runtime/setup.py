@@ -33,7 +33,10 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            # ENTRY-POINTS rig_runtime
+            "talker = rig_runtime.demo_nodes:talker_main",
+            "listener = rig_runtime.demo_nodes:listener_main",
+            "recorder = rig_runtime.recorder:main",
+            "rig-launch = rig_runtime.launcher:main",
         ],
     },
 )

@@ -10,7 +10,7 @@
 """
 
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Any, Literal
 
 Reliability = Literal["reliable", "best_effort"]
 Durability = Literal["volatile", "transient_local"]
@@ -26,20 +26,33 @@ class QosProfile:
     def keep_all(self) -> bool:
         return self.depth == 0
 
-    def to_rosbag_dict(self) -> dict[str, object]:
-        """The offered-QoS record rosbag2 writes into metadata.yaml."""
-        never = {"sec": 2147483647, "nsec": 4294967295}
-        return {
-            "history": 2 if self.keep_all else 1,  # rmw_qos_history_policy_e
-            "depth": self.depth,
-            "reliability": 1 if self.reliability == "reliable" else 2,
-            "durability": 1 if self.durability == "transient_local" else 2,
-            "deadline": dict(never),
-            "lifespan": dict(never),
-            "liveliness": 1,
-            "liveliness_lease_duration": dict(never),
-            "avoid_ros_namespace_conventions": False,
-        }
+    def to_rosbags_qos(self) -> Any:
+        """The offered-QoS record rosbag2 keeps per topic (metadata.yaml, MCAP channel)."""
+        from rosbags.interfaces import (
+            Qos,
+            QosDurability,
+            QosHistory,
+            QosLiveliness,
+            QosReliability,
+            QosTime,
+        )
+
+        never = QosTime(sec=2147483647, nsec=4294967295)
+        return Qos(
+            history=QosHistory.KEEP_ALL if self.keep_all else QosHistory.KEEP_LAST,
+            depth=self.depth,
+            reliability=QosReliability.RELIABLE
+            if self.reliability == "reliable"
+            else QosReliability.BEST_EFFORT,
+            durability=QosDurability.TRANSIENT_LOCAL
+            if self.durability == "transient_local"
+            else QosDurability.VOLATILE,
+            deadline=never,
+            lifespan=never,
+            liveliness=QosLiveliness.AUTOMATIC,
+            liveliness_lease_duration=never,
+            avoid_ros_namespace_conventions=False,
+        )
 
 
 PROFILES: dict[str, QosProfile] = {

@@ -1,0 +1,160 @@
+"""Talker and listener: minimal nodes to check a graph, the transport and the launcher.
+
+``talker`` publishes ``count`` numbered messages (JointState, or a 49-tap PointCloud2) at
+``rate_hz`` (0 = as fast as the transport takes); ``listener`` counts them, checks their order
+and writes a JSON summary to ``result_file`` when it stops. Like demo_nodes_py, but with
+loss and order accounting.
+"""
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .messages import set_stamp
+from .node import Node, run_node
+from .params import Parameter
+
+COMMON = [
+    Parameter("topic", "/chatter", "topic name"),
+    Parameter("message", "joint_state", "payload", choices=("joint_state", "taps")),
+    Parameter("qos", "stream", "QoS profile", choices=("default", "sensor", "latched", "stream")),
+]
+
+TALKER_PARAMETERS = [
+    *COMMON,
+    Parameter("count", 100, "messages to publish", min=1),
+    Parameter("rate_hz", 0.0, "publish rate [Hz]; 0 = as fast as possible", min=0.0),
+    Parameter("wait_for_subscribers", 1, "subscribers to wait for before publishing", min=0),
+    Parameter("exit_code", 0, "exit with this code once done (launcher tests)", min=0, max=255),
+    Parameter("linger_s", 1.0, "keep running this long after the last message [s]", min=0.0),
+]
+
+LISTENER_PARAMETERS = [
+    *COMMON,
+    Parameter("count", 0, "stop after this many messages (0 = run until stopped)", min=0),
+    Parameter("result_file", "", "write a JSON summary here when stopping"),
+]
+
+TAP_COUNT = 49
+
+
+def make_message(node: Node, kind: str, seq: int) -> Any:
+    if kind == "joint_state":
+        msg = node.new_message("sensor_msgs/msg/JointState", name=["pitch"], position=[float(seq)])
+    else:
+        fields = [
+            node.new_message(
+                "sensor_msgs/msg/PointField", name=n, offset=4 * i, datatype=7, count=1
+            )
+            for i, n in enumerate(("x", "y", "z", "pressure"))
+        ]
+        points = np.zeros((TAP_COUNT, 4), dtype=np.float32)
+        points[:, 3] = seq  # float32 holds integers exactly up to 2**24
+        msg = node.new_message(
+            "sensor_msgs/msg/PointCloud2",
+            height=1,
+            width=TAP_COUNT,
+            fields=fields,
+            point_step=16,
+            row_step=16 * TAP_COUNT,
+            data=points.view(np.uint8).ravel(),
+            is_dense=True,
+        )
+    set_stamp(msg.header.stamp, time.time_ns())
+    return msg
+
+
+def sequence_number(kind: str, msg: Any) -> int:
+    if kind == "joint_state":
+        return int(msg.position[0])
+    return int(np.frombuffer(np.asarray(msg.data, dtype=np.uint8).tobytes(), np.float32)[3])
+
+
+class Talker:
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        p = node.params
+        self.kind = p["message"]
+        type_name = (
+            "sensor_msgs/msg/JointState"
+            if self.kind == "joint_state"
+            else "sensor_msgs/msg/PointCloud2"
+        )
+        self.pub = node.create_publisher(type_name, p["topic"], qos=p["qos"])
+        self.sent = 0
+        self.done_at: float | None = None
+        period = 1.0 / p["rate_hz"] if p["rate_hz"] > 0 else 0.001
+        node.create_timer(period, self.tick)
+
+    def tick(self) -> None:
+        p = self.node.params
+        if self.done_at is not None:
+            if time.monotonic() - self.done_at >= p["linger_s"]:
+                self.node.request_shutdown(p["exit_code"])
+            return
+        if self.pub.subscription_count() < p["wait_for_subscribers"]:
+            return
+        burst = 1 if p["rate_hz"] > 0 else 500
+        for _ in range(burst):
+            self.pub.publish(make_message(self.node, self.kind, self.sent))
+            self.sent += 1
+            if self.sent >= p["count"]:
+                self.node.logger.info("published %d messages", self.sent)
+                self.done_at = time.monotonic()
+                return
+
+
+class Listener:
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        p = node.params
+        self.kind = p["message"]
+        type_name = (
+            "sensor_msgs/msg/JointState"
+            if self.kind == "joint_state"
+            else "sensor_msgs/msg/PointCloud2"
+        )
+        self.received = 0
+        self.out_of_order = 0
+        self.last = -1
+        self.first_ns: int | None = None
+        self.last_ns = 0
+        node.create_subscription(type_name, p["topic"], self.on_message, qos=p["qos"])
+
+    def on_message(self, msg: Any) -> None:
+        seq = sequence_number(self.kind, msg)
+        if seq <= self.last:
+            self.out_of_order += 1
+        self.last = seq
+        self.received += 1
+        now = time.monotonic_ns()
+        self.first_ns = self.first_ns or now
+        self.last_ns = now
+        if self.node.params["count"] and self.received >= self.node.params["count"]:
+            self.node.request_shutdown()
+
+    def close(self) -> None:
+        if self.node.params["result_file"]:
+            summary = {
+                "received": self.received,
+                "out_of_order": self.out_of_order,
+                "last": self.last,
+                "span_s": (self.last_ns - (self.first_ns or self.last_ns)) / 1e9,
+            }
+            Path(self.node.params["result_file"]).write_text(json.dumps(summary))
+
+
+def talker_main(argv: list[str] | None = None) -> int:
+    return run_node(Talker, "talker", TALKER_PARAMETERS, argv, description=__doc__ or "")
+
+
+def listener_main(argv: list[str] | None = None) -> int:
+    return run_node(Listener, "listener", LISTENER_PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(talker_main())

@@ -1,0 +1,178 @@
+"""Graph descriptions: the single source of truth for which nodes run, and how.
+
+A graph YAML (read by the launcher here and by the ROS launch files in aero_rig)::
+
+    name: sim
+    nodes:
+      - name: generator               # node name (-r __node:=...)
+        package: multisine_gen        # ament package
+        executable: generator         # console_scripts entry point of that package
+        namespace: /                  # optional
+        parameters: [generator.yaml]  # files: absolute, relative to the graph file,
+                                      #   or package-relative "pkg://aero_rig/config/x.yaml"
+        parameter_overrides: {real_time_factor: 0.0}
+        remappings: {/pitch/command: /pitch/command}
+        stops_graph: false            # true: when it exits (even with 0), the graph stops
+
+A node that exits non-zero always stops the graph.
+"""
+
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+
+class GraphError(ValueError):
+    """An invalid graph description."""
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    name: str
+    package: str
+    executable: str
+    namespace: str = "/"
+    parameters: tuple[Path, ...] = ()
+    parameter_overrides: dict[str, Any] = field(default_factory=dict)
+    remappings: dict[str, str] = field(default_factory=dict)
+    stops_graph: bool = False
+
+    def ros_arguments(self, extra_overrides: dict[str, Any] | None = None) -> list[str]:
+        """The ``--ros-args`` section ``ros2 run`` would pass for this node."""
+        args = ["--ros-args", "-r", f"__node:={self.name}"]
+        if self.namespace not in ("", "/"):
+            args += ["-r", f"__ns:={self.namespace}"]
+        for src, dst in self.remappings.items():
+            args += ["-r", f"{src}:={dst}"]
+        for path in self.parameters:
+            args += ["--params-file", str(path)]
+        overrides = {**self.parameter_overrides, **(extra_overrides or {})}
+        for key, value in overrides.items():
+            args += ["-p", f"{key}:={_yaml_scalar(value)}"]
+        return args
+
+
+def _yaml_scalar(value: Any) -> str:
+    text = yaml.safe_dump(value, default_flow_style=True).strip()
+    return text.removesuffix("\n...").removesuffix("...").strip()
+
+
+@dataclass(frozen=True)
+class GraphSpec:
+    name: str
+    nodes: tuple[NodeSpec, ...]
+    source: Path | None = None
+
+    def node(self, name: str) -> NodeSpec:
+        for n in self.nodes:
+            if n.name == name:
+                return n
+        raise KeyError(f"graph {self.name!r} has no node {name!r}")
+
+
+def package_share(package: str) -> Path:
+    """The package's share directory (config/, launch/): ament index, install or source tree."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory(package))
+    except Exception:
+        pass
+    try:
+        module = __import__(package)
+    except ImportError as exc:
+        raise GraphError(f"package {package!r} is not installed") from exc
+    source = Path(module.__file__ or "").resolve().parent.parent
+    if (source / "package.xml").exists():  # editable install: src/<pkg>/
+        return source
+    import sys
+
+    installed = Path(sys.prefix) / "share" / package
+    if installed.exists():
+        return installed
+    raise GraphError(f"cannot find the share directory of package {package!r}")
+
+
+def resolve_path(text: str, base: Path | None) -> Path:
+    if text.startswith("pkg://"):
+        package, _, rest = text[len("pkg://") :].partition("/")
+        return package_share(package) / rest
+    path = Path(text).expanduser()
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    return path
+
+
+def entry_point(package: str, executable: str) -> str:
+    """``module:function`` of a package's console_scripts entry point."""
+    try:
+        dist = metadata.distribution(package)
+    except metadata.PackageNotFoundError:
+        raise GraphError(f"package {package!r} is not installed") from None
+    names = []
+    for ep in dist.entry_points:
+        if ep.group == "console_scripts":
+            names.append(ep.name)
+            if ep.name == executable:
+                return ep.value
+    raise GraphError(
+        f"package {package!r} has no executable {executable!r}; it has: {sorted(names)}"
+    )
+
+
+def load_graph(path: str | Path) -> GraphSpec:
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise GraphError(f"cannot read graph {path}: {exc}") from exc
+    return parse_graph(document, path.parent, source=path)
+
+
+def parse_graph(document: Any, base: Path | None = None, source: Path | None = None) -> GraphSpec:
+    if not isinstance(document, dict) or not isinstance(document.get("nodes"), list):
+        raise GraphError(f"{source or 'graph'}: expected a mapping with a 'nodes' list")
+    nodes = []
+    seen = set()
+    for i, item in enumerate(document["nodes"]):
+        where = f"{source or 'graph'}: nodes[{i}]"
+        if not isinstance(item, dict):
+            raise GraphError(f"{where}: expected a mapping")
+        unknown = set(item) - {
+            "name",
+            "package",
+            "executable",
+            "namespace",
+            "parameters",
+            "parameter_overrides",
+            "remappings",
+            "stops_graph",
+        }
+        if unknown:
+            raise GraphError(f"{where}: unknown keys {sorted(unknown)}")
+        for key in ("name", "package", "executable"):
+            if not isinstance(item.get(key), str) or not item[key]:
+                raise GraphError(f"{where}: '{key}' (a non-empty string) is required")
+        if item["name"] in seen:
+            raise GraphError(f"{where}: duplicate node name {item['name']!r}")
+        seen.add(item["name"])
+        params = tuple(resolve_path(str(p), base) for p in item.get("parameters") or [])
+        for p in params:
+            if not p.exists():
+                raise GraphError(f"{where} ({item['name']}): parameter file {p} does not exist")
+        nodes.append(
+            NodeSpec(
+                name=item["name"],
+                package=item["package"],
+                executable=item["executable"],
+                namespace=item.get("namespace") or "/",
+                parameters=params,
+                parameter_overrides=dict(item.get("parameter_overrides") or {}),
+                remappings={str(k): str(v) for k, v in (item.get("remappings") or {}).items()},
+                stops_graph=bool(item.get("stops_graph", False)),
+            )
+        )
+    return GraphSpec(name=str(document.get("name", "graph")), nodes=tuple(nodes), source=source)

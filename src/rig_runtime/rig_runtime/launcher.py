@@ -1,0 +1,199 @@
+"""Graph launcher: every node of a graph description as its own OS process.
+
+``rig-launch GRAPH.yaml [--duration S] [-p node.param:=value ...]``
+
+- SIGINT/SIGTERM are forwarded to every node (SIGINT first, as ros2 launch does; SIGTERM
+  after ``--grace`` seconds; SIGKILL after twice that) and every child is reaped.
+- If a node exits non-zero, the others are stopped and the launcher exits non-zero, naming
+  the node and its exit code. A node with ``stops_graph: true`` stops the graph when it exits.
+- ``--duration S`` stops the graph after S seconds (exit 0 if every node stopped cleanly).
+"""
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .graph import GraphError, GraphSpec, NodeSpec, entry_point, load_graph
+
+
+@dataclass
+class NodeProcess:
+    spec: NodeSpec
+    process: subprocess.Popen[bytes]
+
+    @property
+    def returncode(self) -> int | None:
+        return self.process.poll()
+
+
+def node_command(spec: NodeSpec, extra_overrides: dict[str, Any] | None = None) -> list[str]:
+    module, _, func = entry_point(spec.package, spec.executable).partition(":")
+    bootstrap = f"import sys; from {module} import {func} as main; sys.exit(main())"
+    return [sys.executable, "-c", bootstrap, *spec.ros_arguments(extra_overrides)]
+
+
+class Launcher:
+    """Start, watch and stop the processes of a graph."""
+
+    def __init__(
+        self,
+        graph: GraphSpec,
+        env: Mapping[str, str] | None = None,
+        overrides: Mapping[str, dict[str, Any]] | None = None,
+        log_dir: Path | None = None,
+        grace_s: float = 5.0,
+    ) -> None:
+        self.graph = graph
+        self.env = {**os.environ, **(env or {})}
+        self.overrides = dict(overrides or {})
+        self.log_dir = log_dir
+        self.grace_s = grace_s
+        self.processes: list[NodeProcess] = []
+        self.failure: str | None = None
+        self._logs: list[Any] = []
+
+    def start(self) -> None:
+        for spec in self.graph.nodes:
+            cmd = node_command(spec, self.overrides.get(spec.name))
+            stdout: Any = None
+            if self.log_dir is not None:
+                self.log_dir.mkdir(parents=True, exist_ok=True)
+                log = (self.log_dir / f"{spec.name}.log").open("wb")
+                self._logs.append(log)
+                stdout = log
+            # Own process group: a terminal's Ctrl-C reaches the launcher only, which then
+            # stops the nodes in order instead of all of them racing.
+            process = subprocess.Popen(
+                cmd,
+                env=self.env,
+                stdout=stdout,
+                stderr=subprocess.STDOUT if stdout else None,
+                start_new_session=True,
+            )
+            self.processes.append(NodeProcess(spec, process))
+
+    def poll(self) -> str | None:
+        """None while the graph should keep running; else why it must stop."""
+        for proc in self.processes:
+            code = proc.returncode
+            if code is None:
+                continue
+            if code != 0:
+                self.failure = f"node {proc.spec.name!r} exited with code {code}"
+                return self.failure
+            if proc.spec.stops_graph:
+                return f"node {proc.spec.name!r} finished"
+        if self.processes and all(p.returncode is not None for p in self.processes):
+            return "all nodes finished"
+        return None
+
+    def running(self) -> list[str]:
+        return [p.spec.name for p in self.processes if p.returncode is None]
+
+    def stop(self) -> dict[str, int]:
+        """Stop every node (SIGINT, then SIGTERM, then SIGKILL) and reap it."""
+        for sig, wait_s in (
+            (signal.SIGINT, self.grace_s),
+            (signal.SIGTERM, self.grace_s),
+            (signal.SIGKILL, self.grace_s),
+        ):
+            alive = [p for p in self.processes if p.returncode is None]
+            if not alive:
+                break
+            for p in alive:
+                try:
+                    os.kill(p.process.pid, sig)
+                except ProcessLookupError:
+                    pass
+            deadline = time.monotonic() + wait_s
+            while time.monotonic() < deadline and any(p.returncode is None for p in alive):
+                time.sleep(0.02)
+        codes = {}
+        for p in self.processes:
+            try:
+                codes[p.spec.name] = p.process.wait(timeout=self.grace_s)
+            except subprocess.TimeoutExpired:  # pragma: no cover - SIGKILL cannot be ignored
+                codes[p.spec.name] = -9
+        for log in self._logs:
+            log.close()
+        return codes
+
+    def run(self, duration_s: float | None = None) -> int:
+        """Start, wait for a stop reason (node exit, duration, signal), stop. Exit code."""
+        stop_reason: list[str] = []
+
+        def _on_signal(signum: int, _frame: Any) -> None:
+            stop_reason.append(signal.Signals(signum).name)
+
+        previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            self.start()
+            deadline = None if duration_s is None else time.monotonic() + duration_s
+            reason = None
+            while reason is None and not stop_reason:
+                reason = self.poll()
+                if deadline is not None and time.monotonic() >= deadline:
+                    reason = f"duration {duration_s:g} s reached"
+                time.sleep(0.05)
+            reason = reason or f"received {stop_reason[0]}"
+            _log(f"stopping graph {self.graph.name!r}: {reason}")
+        finally:
+            codes = self.stop()
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        if self.failure:
+            _log(f"error: {self.failure}")
+            return 1
+        bad = {n: c for n, c in codes.items() if c not in (0, -signal.SIGINT, 130)}
+        if bad:
+            _log(f"error: nodes did not stop cleanly: {bad}")
+            return 1
+        return 0
+
+
+def _log(text: str) -> None:
+    print(f"[rig-launch] {text}", file=sys.stderr, flush=True)
+
+
+def _parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
+    import yaml
+
+    result: dict[str, dict[str, Any]] = {}
+    for item in items:
+        key, sep, value = item.partition(":=")
+        node, dot, param = key.partition(".")
+        if not sep or not dot:
+            raise GraphError(f"-p {item!r}: expected NODE.PARAM:=VALUE")
+        result.setdefault(node, {})[param] = yaml.safe_load(value)
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="rig-launch", description=__doc__.split("\n\n")[0])
+    parser.add_argument("graph", help="graph description YAML")
+    parser.add_argument("--duration", type=float, default=None, help="stop after S seconds")
+    parser.add_argument(
+        "-p", dest="overrides", action="append", default=[], help="NODE.PARAM:=VALUE override"
+    )
+    parser.add_argument("--grace", type=float, default=5.0, help="seconds per stop stage")
+    args = parser.parse_args(argv)
+    try:
+        graph = load_graph(args.graph)
+        launcher = Launcher(graph, overrides=_parse_overrides(args.overrides), grace_s=args.grace)
+        for spec in graph.nodes:
+            entry_point(spec.package, spec.executable)  # fail before starting anything
+    except GraphError as exc:
+        _log(f"error: {exc}")
+        return 2
+    return launcher.run(args.duration)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,95 @@
+"""Recorder node: topics of the graph to a rosbag2 directory with MCAP storage.
+
+Records the listed topics (or every topic with a publisher when ``topics`` is empty) as raw
+CDR, with the Jazzy type hash and the offered QoS in metadata.yaml, like
+``ros2 bag record -s mcap``. Readers match the offered QoS (transient-local topics are
+recorded from their last latched sample; reliable topics with keep-all history so nothing is
+dropped under load). Finalised on SIGINT/SIGTERM; after ``kill -9`` the bag is readable up to
+the last closed split (at most ``split_seconds`` of data lost, see bag.py).
+"""
+
+import sys
+from pathlib import Path
+from typing import Any
+
+from .bag import SplitBagWriter
+from .node import Node, run_node
+from .params import Parameter
+from .qos import QosProfile
+
+PARAMETERS = [
+    Parameter("output", "", "bag directory to create (must not exist); required"),
+    Parameter(
+        "topics",
+        [],
+        "topics to record; empty = every topic that has a publisher",
+        element_type=str,
+    ),
+    Parameter("exclude", ["/rosout", "/parameter_events"], "topics never recorded"),
+    Parameter(
+        "split_seconds",
+        5.0,
+        "close and list a bag file this often [s]: the most a kill -9 can lose",
+        min=0.1,
+        max=3600.0,
+    ),
+    Parameter("discovery_period_s", 0.2, "how often to look for new topics [s]", min=0.01),
+]
+
+
+class Recorder:
+    def __init__(self, node: Node) -> None:
+        output = node.params["output"]
+        if not output:
+            raise ValueError("parameter 'output' is required: the bag directory to create")
+        self.node = node
+        self.wanted = [node.resolve_topic(t) for t in node.params["topics"]]
+        self.exclude = set(node.params["exclude"])
+        self.writer = SplitBagWriter(Path(output), split_seconds=node.params["split_seconds"])
+        self.subscriptions: dict[str, Any] = {}
+        node.logger.info(
+            "recording %s to %s", ", ".join(self.wanted) or "all topics", Path(output).resolve()
+        )
+        self._discover()
+        node.create_timer(node.params["discovery_period_s"], self._discover)
+        node.create_timer(min(1.0, node.params["split_seconds"] / 2), self.writer.maybe_split)
+
+    def _discover(self) -> None:
+        for topic, (type_name, offered) in self.node.topic_types().items():
+            if topic in self.subscriptions or topic in self.exclude:
+                continue
+            if self.wanted and topic not in self.wanted:
+                continue
+            self._subscribe(topic, type_name, offered)
+
+    def _subscribe(self, topic: str, type_name: str, offered: QosProfile | None) -> None:
+        offered = offered or QosProfile("reliable", "volatile", 10)
+        reader_qos = QosProfile(
+            offered.reliability,
+            offered.durability,
+            0 if offered.reliability == "reliable" else 1000,
+        )
+        connection = self.writer.add_connection(topic, type_name, offered)
+
+        def on_message(item: tuple[bytes, int]) -> None:
+            data, receive_ns = item
+            self.writer.write(connection, receive_ns, data)
+
+        self.subscriptions[topic] = self.node.create_subscription(
+            type_name, topic, on_message, qos=reader_qos, raw=True
+        )
+        self.node.logger.info("recording %s [%s]", topic, type_name)
+
+    def close(self) -> None:
+        self.writer.close()
+        self.node.logger.info(
+            "bag %s finalised: %d messages", self.writer.path, self.writer.message_count
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(Recorder, "recorder", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,116 @@
+"""Helpers for tests that run nodes as processes (like launch_testing, much smaller).
+
+Every process started through :class:`Processes` is stopped and reaped when the context
+exits, whatever happened in the test; every wait is bounded. Each test gets its own
+``ROS_DOMAIN_ID`` so graphs never see each other, and the loopback-only DDS configuration.
+"""
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+_counter = itertools.count()
+
+
+def unique_domain_id() -> int:
+    """A domain id in 100..229 unlikely to clash with another test run on this machine."""
+    return 100 + (os.getpid() * 7 + next(_counter)) % 130
+
+
+def graph_env(domain_id: int | None = None, **extra: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(unique_domain_id() if domain_id is None else domain_id)
+    env["RIG_RUNTIME_BACKEND"] = "dds"
+    env.pop("CYCLONEDDS_URI", None)
+    env["RIG_DDS_NETWORK"] = "loopback"
+    env["PYTHONUNBUFFERED"] = "1"
+    env.update(extra)
+    return env
+
+
+def wait_for(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.05) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(interval_s)
+    return predicate()
+
+
+class Processes:
+    """Start processes; on exit SIGINT, then SIGKILL after ``grace_s``, and reap all."""
+
+    def __init__(self, env: dict[str, str] | None = None, log_dir: Path | None = None) -> None:
+        self.env = env or graph_env()
+        self.log_dir = log_dir
+        self.procs: list[subprocess.Popen[bytes]] = []
+        self._logs: list[Any] = []
+
+    def start(self, args: Sequence[str], name: str | None = None) -> subprocess.Popen[bytes]:
+        stdout: Any = subprocess.DEVNULL
+        if self.log_dir is not None:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            log = (self.log_dir / f"{name or len(self.procs)}.log").open("wb")
+            self._logs.append(log)
+            stdout = log
+        proc = subprocess.Popen(
+            list(args),
+            env=self.env,
+            stdout=stdout,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        self.procs.append(proc)
+        return proc
+
+    def start_python(self, code_or_module: str, *args: str, name: str | None = None) -> Any:
+        if code_or_module.startswith("-m "):
+            return self.start([sys.executable, "-m", code_or_module[3:], *args], name)
+        return self.start([sys.executable, "-c", code_or_module, *args], name)
+
+    def start_entry(
+        self, package: str, executable: str, *args: str, name: str | None = None
+    ) -> Any:
+        from .graph import entry_point
+
+        module, _, func = entry_point(package, executable).partition(":")
+        code = f"import sys; from {module} import {func} as m; sys.exit(m())"
+        return self.start([sys.executable, "-c", code, *args], name or executable)
+
+    def log(self, name: str) -> str:
+        if self.log_dir is None:
+            return ""
+        path = self.log_dir / f"{name}.log"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def stop_all(self, grace_s: float = 5.0) -> None:
+        for sig in (signal.SIGINT, signal.SIGKILL):
+            alive = [p for p in self.procs if p.poll() is None]
+            for p in alive:
+                try:
+                    os.kill(p.pid, sig)
+                except ProcessLookupError:
+                    pass
+            wait_for(lambda alive=alive: all(p.poll() is not None for p in alive), grace_s)
+        for p in self.procs:
+            p.wait(timeout=grace_s)
+        for log in self._logs:
+            log.close()
+
+    def __enter__(self) -> "Processes":
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop_all()

@@ -1,0 +1,120 @@
+"""The launcher runs a graph as processes, stops all on a crash, and leaves nothing behind."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import yaml
+from rig_runtime.graph import load_graph
+from rig_runtime.testing import graph_env, wait_for
+
+
+def _graph(tmp_path: Path, talker_exit: int, listener_result: Path) -> Path:
+    params = tmp_path / "params.yaml"
+    params.write_text(
+        yaml.safe_dump({"listener": {"ros__parameters": {"result_file": str(listener_result)}}})
+    )
+    graph = {
+        "name": "test",
+        "nodes": [
+            {
+                "name": "listener",
+                "package": "rig_runtime",
+                "executable": "listener",
+                "parameters": ["params.yaml"],
+            },
+            {
+                "name": "talker",
+                "package": "rig_runtime",
+                "executable": "talker",
+                "parameter_overrides": {"count": 200, "exit_code": talker_exit, "linger_s": 0.2},
+            },
+        ],
+    }
+    path = tmp_path / "graph.yaml"
+    path.write_text(yaml.safe_dump(graph))
+    return path
+
+
+def _launch(graph: Path, *extra: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "rig_runtime.launcher", str(graph), *extra],
+        env=graph_env(),
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def _descendants(pid: int) -> list[psutil.Process]:
+    try:
+        return psutil.Process(pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+def test_crashing_node_stops_graph_nonzero_naming_it(tmp_path: Path) -> None:
+    result = tmp_path / "listener.json"
+    proc = _launch(_graph(tmp_path, 3, result))
+    try:
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode != 0
+    assert "node 'talker' exited with code 3" in err
+    # The listener was stopped cleanly (SIGINT) and wrote its summary: all 200 arrived.
+    assert json.loads(result.read_text())["received"] == 200
+
+
+def test_duration_and_sigterm_reap_every_child(tmp_path: Path) -> None:
+    result = tmp_path / "listener.json"
+    graph = _graph(tmp_path, 0, result)
+    proc = _launch(graph, "--duration", "30")
+    try:
+        assert wait_for(lambda: len(_descendants(proc.pid)) >= 2, 20)
+        children = _descendants(proc.pid)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, proc.stderr.read() if proc.stderr else ""
+    assert all(not c.is_running() or c.status() == psutil.STATUS_ZOMBIE for c in children)
+
+
+def test_graph_description_errors(tmp_path: Path) -> None:
+    import pytest
+    from rig_runtime.graph import GraphError
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("nodes:\n  - name: a\n    package: rig_runtime\n")
+    with pytest.raises(GraphError, match="'executable'"):
+        load_graph(bad)
+    missing = tmp_path / "missing.yaml"
+    missing.write_text(
+        "nodes:\n  - {name: a, package: rig_runtime, executable: talker, parameters: [nope.yaml]}\n"
+    )
+    with pytest.raises(GraphError, match="does not exist"):
+        load_graph(missing)
+    proc = subprocess.run(
+        [sys.executable, "-m", "rig_runtime.launcher", str(_unknown_exe(tmp_path))],
+        env=graph_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2 and "has no executable 'nope'" in proc.stderr
+
+
+def _unknown_exe(tmp_path: Path) -> Path:
+    path = tmp_path / "unknown.yaml"
+    path.write_text("nodes:\n  - {name: a, package: rig_runtime, executable: nope}\n")
+    return path

@@ -1,0 +1,106 @@
+"""Invalid parameters stop a node before it creates anything, naming the parameter."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from rig_runtime.names import parse_ros_args
+from rig_runtime.params import Parameter, ParameterError, resolve_parameters
+from rig_runtime.testing import graph_env
+
+PARAMS = [
+    Parameter("rate_hz", 200.0, "sample rate", min=1.0, max=1000.0),
+    Parameter("count", 10, "messages", min=1),
+    Parameter("mode", "sim", "mode", choices=("sim", "rig")),
+    Parameter("gains", [1.0, 2.0], "gains", min=0.0),
+]
+
+
+def test_defaults_files_and_overrides_in_ros_order(tmp_path: Path) -> None:
+    f = tmp_path / "p.yaml"
+    f.write_text(
+        "/**:\n  ros__parameters:\n    count: 5\nnode:\n  ros__parameters:\n    rate_hz: 100\n"
+    )
+    ps = resolve_parameters(PARAMS, "/node", [f], [("count", "7")])
+    assert ps["rate_hz"] == 100.0 and isinstance(ps["rate_hz"], float)
+    assert ps["count"] == 7
+    assert ps["gains"] == [1.0, 2.0]
+
+
+@pytest.mark.parametrize(
+    ("override", "fragment"),
+    [
+        (("rate_hz", "5000"), "'rate_hz' = 5000"),
+        (("rate_hz", "fast"), "'rate_hz' = 'fast'"),
+        (("count", "1.5"), "'count' = 1.5"),
+        (("mode", "hardware"), "one of ['sim', 'rig']"),
+        (("gains", "[1.0, -1.0]"), "'gains'"),
+        (("nonexistent", "1"), "unknown parameter 'nonexistent'"),
+    ],
+)
+def test_invalid_values_are_named(override: tuple[str, str], fragment: str) -> None:
+    with pytest.raises(ParameterError, match=None) as info:
+        resolve_parameters(PARAMS, "/node", [], [override])
+    assert fragment in str(info.value)
+
+
+def test_unknown_name_in_yaml(tmp_path: Path) -> None:
+    f = tmp_path / "p.yaml"
+    f.write_text("node:\n  ros__parameters:\n    rate_hz: 10.0\n    typo_name: 3\n")
+    with pytest.raises(ParameterError, match="unknown parameter 'typo_name'"):
+        resolve_parameters(PARAMS, "/node", [f])
+
+
+def test_ros_args_parsing() -> None:
+    args = parse_ros_args(
+        [
+            "x",
+            "--ros-args",
+            "-r",
+            "__node:=gen",
+            "-r",
+            "__ns:=/rig",
+            "-r",
+            "/a:=/b",
+            "-p",
+            "k:=1",
+            "--params-file",
+            "f.yaml",
+            "--",
+            "y",
+        ]
+    )
+    assert (args.node_name, args.namespace) == ("gen", "/rig")
+    assert args.remaps == {"/a": "/b"} and args.overrides == [("k", "1")]
+    assert args.param_files == ["f.yaml"] and args.user_args == ["x", "y"]
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["-p", "count:=-3"], "'count' = -3"),
+        (["-p", "rate_hz:=abc"], "'rate_hz' = 'abc'"),
+        (["-p", "bogus:=1"], "unknown parameter 'bogus'"),
+    ],
+)
+def test_node_process_exits_nonzero_naming_parameter(args: list[str], fragment: str) -> None:
+    code = "import sys; from rig_runtime.demo_nodes import talker_main; sys.exit(talker_main())"
+    proc = subprocess.run(
+        [sys.executable, "-c", code, "--ros-args", *args],
+        env=graph_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert fragment in proc.stderr
+
+
+def test_help_lists_parameters() -> None:
+    code = "import sys; from rig_runtime.demo_nodes import talker_main; sys.exit(talker_main())"
+    proc = subprocess.run(
+        [sys.executable, "-c", code, "--help"], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0
+    assert "rate_hz" in proc.stdout and "range [0, inf]" in proc.stdout
