@@ -1,0 +1,99 @@
+"""Validation metrics and the nonparametric BLA's prediction of single-sine responses."""
+
+import numpy as np
+
+from aero_identification.bla import BLA
+
+
+def relative_rms_error(y_true: np.ndarray, y_hat: np.ndarray) -> float:
+    """Relative RMS error rms(y − ŷ) / rms(y − mean y) (DESIGN.md §7, the paper's Table 1).
+
+    Args:
+        y_true: measured output, any shape.
+        y_hat: predicted output, same shape.
+
+    Returns:
+        The ratio: 0 for a perfect prediction, 1 for predicting the mean.
+
+    Raises:
+        ValueError: for different shapes, empty or non-finite data, or a constant y_true.
+    """
+    y_true = np.asarray(y_true, dtype=float)
+    y_hat = np.asarray(y_hat, dtype=float)
+    if y_true.shape != y_hat.shape:
+        raise ValueError(
+            f"y_true and y_hat must have the same shape; got {y_true.shape} and {y_hat.shape}"
+        )
+    if y_true.size == 0:
+        raise ValueError("y_true is empty")
+    if not (np.all(np.isfinite(y_true)) and np.all(np.isfinite(y_hat))):
+        raise ValueError("y_true or y_hat contains NaN or inf (a diverged simulation?)")
+    spread = np.sqrt(np.mean((y_true - y_true.mean()) ** 2))
+    if spread == 0:
+        raise ValueError("y_true is constant: the relative RMS error is undefined")
+    return float(np.sqrt(np.mean((y_true - y_hat) ** 2)) / spread)
+
+
+def interpolate_frf(bla: BLA, freq_hz: float | np.ndarray) -> np.ndarray:
+    """BLA at arbitrary frequencies inside the excited band.
+
+    Magnitude and unwrapped phase are interpolated linearly between the excited lines
+    (interpolating the complex value would shrink the magnitude between lines where the phase
+    turns).
+
+    Raises:
+        ValueError: for a frequency outside [first, last] excited line (no extrapolation).
+    """
+    f = np.asarray(freq_hz, dtype=float)
+    lo, hi = float(bla.freq[0]), float(bla.freq[-1])
+    if np.any(f < lo * (1 - 1e-12)) or np.any(f > hi * (1 + 1e-12)):
+        raise ValueError(
+            f"frequency {freq_hz} Hz lies outside the excited band {lo:g} … {hi:g} Hz of the "
+            "BLA; the nonparametric FRF cannot be extrapolated (use a parametric model)"
+        )
+    magnitude = np.interp(f, bla.freq, np.abs(bla.G))
+    phase = np.interp(f, bla.freq, np.unwrap(np.angle(bla.G)))
+    return magnitude * np.exp(1j * phase)
+
+
+def sine_component(u: np.ndarray, fs: float, freq_hz: float) -> tuple[complex, float]:
+    """Least-squares fit u[t] ≈ c + Re(A exp(j2πf t/fs)); returns (A, c).
+
+    Exact (the DFT bin) for a record of whole sine periods; also fine otherwise.
+    """
+    u = np.asarray(u, dtype=float).reshape(-1)
+    if u.size < 3:
+        raise ValueError(f"need at least 3 samples to fit a sine; got {u.size}")
+    t = np.arange(u.size) / fs
+    w = 2 * np.pi * freq_hz
+    basis = np.column_stack([np.ones_like(t), np.cos(w * t), np.sin(w * t)])
+    (c, a, b), *_ = np.linalg.lstsq(basis, u, rcond=None)
+    return complex(a, -b), float(c)
+
+
+def predict_bla_sine(
+    bla: BLA, freq_hz: float, u: np.ndarray, y_mean: float, fs: float | None = None
+) -> np.ndarray:
+    """Response of the nonparametric BLA to a measured single-sine input record.
+
+    The sine component of `u` at `freq_hz` (least squares, `sine_component`) is multiplied by
+    the BLA interpolated at that frequency (`interpolate_frf`). The BLA maps deviations around
+    the operating point, so the static offset of the prediction is the measured mean of y over
+    the record, passed as `y_mean` (the paper's Table 1 treats all three model kinds alike).
+    Harmonics in u other than the sine are ignored.
+
+    Args:
+        bla: the BLA estimate.
+        freq_hz: the sine frequency [Hz], inside the excited band.
+        u: (T,) measured input record, whole sine periods, sampled at `fs`.
+        y_mean: measured mean of the output over the same record.
+        fs: sampling frequency of u [Hz]; default bla.fs.
+
+    Returns:
+        (T,) predicted output ŷ[t] = y_mean + Re(G(f)·A·exp(j2πf t/fs)).
+    """
+    fs = bla.fs if fs is None else float(fs)
+    amplitude, _ = sine_component(u, fs, freq_hz)
+    G = complex(interpolate_frf(bla, freq_hz))
+    t = np.arange(np.asarray(u).size) / fs
+    return y_mean + np.real(G * amplitude * np.exp(2j * np.pi * freq_hz * t))
