@@ -75,7 +75,7 @@ def cyclone_config() -> str | None:
         f"<MaxAutoParticipantIndex>{max_index}</MaxAutoParticipantIndex>"
         '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
         '<Internal><SocketReceiveBufferSize min="4MB"/></Internal>'
-        "<Tracing><Verbosity>severe</Verbosity></Tracing>"
+        "<Tracing><Verbosity>severe</Verbosity><OutputFile>stderr</OutputFile></Tracing>"
         "</Domain></CycloneDDS>"
     )
 

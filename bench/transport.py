@@ -1,0 +1,157 @@
+"""Transport benchmark: two processes on the Cyclone DDS backend, 49-tap PointCloud2 messages.
+
+Round trip: this process publishes a tap cloud at 200 Hz on /bench/ping; an echo process
+republishes it on /bench/pong; the round-trip time is measured per message.
+Throughput: this process publishes ``--flood`` messages as fast as the reliable transport
+takes on /bench/flood (QoS "stream": reliable, keep-all, back-pressure); the echo process counts
+them and reports the count and its first/last receive times (one-way sustained rate).
+
+    .venv/bin/python bench/transport.py [--seconds 10] [--flood 20000]
+
+Last line: JSON with sent, received, lost, throughput_msg_s, rtt_p50_ms, rtt_p99_ms.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+from rig_runtime.demo_nodes import make_message
+from rig_runtime.node import Node
+from rig_runtime.testing import graph_env, unique_domain_id
+
+CLOUD = "sensor_msgs/msg/PointCloud2"
+RESULT = "std_msgs/msg/String"
+
+
+def echo_main() -> int:
+    node = Node("bench_echo", argv=[])
+    pong = node.create_publisher(CLOUD, "/bench/pong", qos="stream")
+    result = node.create_publisher(RESULT, "/bench/result", qos="latched")
+    state = {"count": 0, "first": 0, "last": 0}
+
+    def on_ping(msg: object) -> None:
+        pong.publish(msg)
+
+    def on_flood(_msg: object) -> None:
+        now = time.monotonic_ns()
+        state["first"] = state["first"] or now
+        state["last"] = now
+        state["count"] += 1
+
+    def report() -> None:
+        result.publish(node.new_message(RESULT, data=json.dumps(state)))
+
+    node.create_subscription(CLOUD, "/bench/ping", on_ping, qos="stream")
+    node.create_subscription(CLOUD, "/bench/flood", on_flood, qos="stream")
+    node.create_timer(0.2, report)
+    try:
+        node.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.close()
+    return 0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="round-trip phase length")
+    parser.add_argument("--flood", type=int, default=20000, help="messages in throughput phase")
+    parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.echo:
+        return echo_main()
+
+    env = graph_env(unique_domain_id())
+    os.environ.update(
+        {k: env[k] for k in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK")}
+    )
+    echo = subprocess.Popen([sys.executable, __file__, "--echo"], env=env)
+    try:
+        node = Node("bench_ping", argv=[])
+        ping = node.create_publisher(CLOUD, "/bench/ping", qos="stream")
+        flood = node.create_publisher(CLOUD, "/bench/flood", qos="stream")
+        sent_at: dict[int, int] = {}
+        rtts: list[float] = []
+        latest: dict[str, object] = {}
+
+        def on_pong(msg: object) -> None:
+            seq = int(np.frombuffer(np.asarray(msg.data, np.uint8).tobytes(), np.float32)[3])  # type: ignore[attr-defined]
+            t0 = sent_at.pop(seq, None)
+            if t0 is not None:
+                rtts.append((time.perf_counter_ns() - t0) / 1e6)
+
+        def on_result(msg: object) -> None:
+            latest.update(json.loads(msg.data))  # type: ignore[attr-defined]
+
+        node.create_subscription(CLOUD, "/bench/pong", on_pong, qos="stream")
+        node.create_subscription(RESULT, "/bench/result", on_result, qos="latched")
+        if not node.spin_until(
+            lambda: ping.subscription_count() and flood.subscription_count() and latest, 30
+        ):
+            raise RuntimeError("echo process did not appear on the DDS domain within 30 s")
+
+        # Phase 1: round trip at 200 Hz.
+        n_ping = int(args.seconds * 200)
+        period = 1 / 200
+        start = time.perf_counter()
+        for k in range(n_ping):
+            target = start + k * period
+            node.spin_until(lambda target=target: time.perf_counter() >= target, 1.0)
+            msg = make_message(node, "taps", k)
+            sent_at[k] = time.perf_counter_ns()
+            ping.publish(msg)
+        node.spin_until(lambda: not sent_at, 5.0)
+        pings_lost = len(sent_at)
+
+        # Phase 2: sustained reliable throughput, one way.
+        msgs = [make_message(node, "taps", k) for k in range(min(args.flood, 1000))]
+        t_start = time.perf_counter()
+        for k in range(args.flood):
+            flood.publish(msgs[k % len(msgs)])
+            if k % 200 == 0:
+                node.spin_once(0)
+        node.spin_until(lambda: latest.get("count", 0) >= args.flood, 60)
+        node.spin_until(lambda: False, 0.5)  # let the last report arrive
+        t_send = time.perf_counter() - t_start
+        received = int(latest.get("count", 0))
+        span_s = (int(latest["last"]) - int(latest["first"])) / 1e9 if received > 1 else t_send  # type: ignore[arg-type]
+        node.close()
+    finally:
+        echo.send_signal(2)
+        try:
+            echo.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            echo.kill()
+            echo.wait()
+
+    rtt = np.array(rtts) if rtts else np.array([np.nan])
+    figures = {
+        "sent": args.flood,
+        "received": received,
+        "lost": args.flood - received,
+        "throughput_msg_s": round(received / span_s, 1),
+        "rtt_p50_ms": round(float(np.percentile(rtt, 50)), 3),
+        "rtt_p99_ms": round(float(np.percentile(rtt, 99)), 3),
+        "rtt_samples": len(rtts),
+        "rtt_lost": pings_lost,
+        "message_bytes": len(bytes(np.asarray(msgs[0].data))) + 100,
+    }
+    print(
+        f"round trip at 200 Hz: {len(rtts)} samples, p50 {figures['rtt_p50_ms']} ms, "
+        f"p99 {figures['rtt_p99_ms']} ms, lost {pings_lost}"
+    )
+    print(
+        f"reliable throughput: {received}/{args.flood} received, "
+        f"{figures['throughput_msg_s']} msg/s sustained"
+    )
+    print(json.dumps(figures))
+    return 0 if received == args.flood else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
