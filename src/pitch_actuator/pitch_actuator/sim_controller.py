@@ -241,6 +241,21 @@ class ControllerCore:
         )
 
 
+def _drain(sock: socket.socket, core: ControllerCore, now: float) -> tuple[str, int] | None:
+    """Feed every pending datagram to the core; returns the address of the newest fresh host
+    packet (where feedback goes), or None if there was none."""
+    host_addr = None
+    while True:
+        try:
+            data, addr = sock.recvfrom(2048)
+        except (BlockingIOError, InterruptedError):
+            return host_addr
+        except ConnectionRefusedError:  # ICMP from a host that went away
+            continue
+        if core.on_datagram(data, now):
+            host_addr = addr
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m pitch_actuator.sim_controller",
@@ -304,15 +319,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             now = time.monotonic()
             if args.duration > 0 and now - start >= args.duration:
                 break
-            while True:
-                try:
-                    data, addr = sock.recvfrom(2048)
-                except (BlockingIOError, InterruptedError):
-                    break
-                except ConnectionRefusedError:  # ICMP from a host that went away
-                    continue
-                if core.on_datagram(data, now):
-                    host_addr = addr
+            host_addr = _drain(sock, core, now) or host_addr
             feedback = core.step(now, time.time_ns())
             if host_addr is not None:
                 try:
@@ -327,6 +334,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             elif delay > 0:
                 time.sleep(delay)
     finally:
+        # Account for what arrived before the stop, so the audit's counters are complete.
+        _drain(sock, core, time.monotonic())
         core.log_statistics(overruns)
         if audit is not None:
             audit.close()
