@@ -27,6 +27,7 @@ setup(
         "matplotlib>=3.7",
     ],
     zip_safe=False,
+    extras_require={"test": ["pytest"]},
     maintainer="Pitching-wing rig maintainers",
     maintainer_email="maintainers@pitching-wing.invalid",
     description=ElementTree.parse("package.xml").findtext("description"),

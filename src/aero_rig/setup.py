@@ -29,6 +29,7 @@ setup(
         "rerun-sdk>=0.41",
     ],
     zip_safe=False,
+    extras_require={"test": ["pytest"]},
     maintainer="Pitching-wing rig maintainers",
     maintainer_email="maintainers@pitching-wing.invalid",
     description=ElementTree.parse("package.xml").findtext("description"),

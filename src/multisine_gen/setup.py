@@ -20,6 +20,7 @@ setup(
     package_data={package_name: ["py.typed"]},
     install_requires=["rig_runtime", "numpy>=1.26", "scipy>=1.11"],
     zip_safe=False,
+    extras_require={"test": ["pytest"]},
     maintainer="Pitching-wing rig maintainers",
     maintainer_email="maintainers@pitching-wing.invalid",
     description=ElementTree.parse("package.xml").findtext("description"),

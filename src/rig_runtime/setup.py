@@ -26,6 +26,7 @@ setup(
         "psutil>=5.9",
     ],
     zip_safe=False,
+    extras_require={"test": ["pytest"]},
     maintainer="Pitching-wing rig maintainers",
     maintainer_email="maintainers@pitching-wing.invalid",
     description=ElementTree.parse("package.xml").findtext("description"),
