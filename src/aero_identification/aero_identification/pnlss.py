@@ -1,0 +1,646 @@
+"""Polynomial nonlinear state-space (PNLSS) model fitted by Levenberg–Marquardt.
+
+Model (Paduart et al., "Identification of nonlinear systems using polynomial nonlinear state
+space models", Automatica 46(4) 2010, eq. (1)):
+
+    x(t+1) = A x(t) + B u(t) + E ζ(x(t), u(t))
+    y(t)   = C x(t) + D u(t) + F η(x(t), u(t))
+
+ζ, η: all monomials of [x; u] of the chosen total degrees, restricted by the structure
+("full", "statesonly", "inputsonly"; see monomials.py). The same monomial set is used in the
+state and the output equation.
+
+Coordinates and operating point (the same convention as subspace.py: the model maps deviations
+around the operating point). Internally everything is normalised so the monomials are well
+conditioned:
+
+    u_n = (u − u_mean) / u_scale,   y = y_mean + y_scale · y_n,
+
+and the states are scaled so that the initial linear model's states have unit standard
+deviation on the training input. A, B, C, D, E, F are stored in these normalised coordinates;
+`simulate` takes and returns absolute signals. u_mean is the training-input mean; y_mean is
+the training-output mean plus the fitted output offset (even-degree monomials have a non-zero
+mean, so the model's output at the operating point is a parameter, not the data mean).
+
+Fit (Paduart 2010 §4; PNLSS toolbox `fLMnlssWeighted`):
+
+- start from the linear model (E = F = 0);
+- each of the P·M periods is an independent periodic record; its transient is removed by
+  prepending the last n_transient input samples of the same record (steady state of a periodic
+  input), whose outputs are simulated but not part of the cost;
+- the cost is the mean squared simulation error in normalised output units, optionally weighted
+  per DFT bin (1/σ²_Y(k), the output noise variance estimated over the periods: the
+  nonparametric noise model the BLA uses);
+- the Jacobian comes from the forward sensitivity recursion (pnlss_kernels.py), its columns are
+  normalised to unit norm and the Levenberg–Marquardt step δ = −V diag(s/(s²+λ²)) Uᵀ e is taken
+  from the SVD of J, with the rank capped at n_θ − nx² (the similarity transform x ↦ T x leaves
+  the input–output behaviour unchanged, so J has nx² null directions);
+- divergence guard: a trial step whose training or validation simulation leaves the state bound
+  or is NaN is rejected and λ raised; the returned model is the one best on the validation
+  record (the initial linear model included), or the last accepted one without validation.
+"""
+
+import contextlib
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from aero_identification.data import PeriodicData
+from aero_identification.monomials import STRUCTURES, check_degrees, structure_exponents
+from aero_identification.pnlss_kernels import jacobian_records, simulate_records
+from aero_identification.subspace import LinearStateSpace, _as_input
+
+try:  # a dependency of scikit-learn; optional here
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover
+    threadpool_limits = None
+
+
+@contextlib.contextmanager
+def _blas_threads(n: int) -> Iterator[None]:
+    """Limit the BLAS thread pool inside the block (no-op without threadpoolctl)."""
+    if threadpool_limits is None:
+        yield
+    else:
+        with threadpool_limits(limits=n, user_api="blas"):
+            yield
+
+
+# A normalised state beyond this magnitude (states have unit RMS under the initial linear model)
+# means the simulation diverged: it is stopped there and the trial step rejected.
+STATE_BOUND = 1e4
+
+
+@dataclass(frozen=True)
+class LMIteration:
+    """One Levenberg–Marquardt trial.
+
+    Attributes:
+        iteration: trial number (0 = the initial model).
+        cost: training cost of the trial parameters: mean squared (weighted) simulation error
+            in normalised output units; inf if the simulation diverged.
+        cost_val: validation mean squared error [output units²] (nan without validation, inf if
+            the validation simulation diverged).
+        lambda_: damping λ used for the step (relative to the largest singular value of the
+            normalised Jacobian; nan for iteration 0).
+        accepted: whether the step was kept.
+    """
+
+    iteration: int
+    cost: float
+    cost_val: float
+    lambda_: float
+    accepted: bool
+
+
+@dataclass(eq=False)
+class PNLSSModel:
+    """A PNLSS model in normalised coordinates (module docstring).
+
+    Attributes:
+        A: (nx, nx); B: (nx, nu); C: (ny, nx); D: (ny, nu) linear part.
+        E: (nx, Kζ) coefficients of the state-equation monomials.
+        F: (ny, Kη) coefficients of the output-equation monomials.
+        exponents_state: (Kζ, nx+nu) int exponents of ζ.
+        exponents_output: (Kη, nx+nu) int exponents of η.
+        u_mean, u_scale: (nu,) input normalisation.
+        y_mean, y_scale: (ny,) output normalisation (y_mean includes the fitted offset).
+        fs: sampling frequency [Hz].
+        degrees: total degrees of the monomials.
+        structure: "full", "statesonly" or "inputsonly".
+        n_transient: samples prepended per record during the fit.
+        history_: the LM trials (fit only; not serialised).
+        cost_: training cost of this model (normalised output units², see LMIteration.cost).
+        cost_val_: validation mean squared error of this model [output units²].
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    E: np.ndarray
+    F: np.ndarray
+    exponents_state: np.ndarray
+    exponents_output: np.ndarray
+    u_mean: np.ndarray
+    u_scale: np.ndarray
+    y_mean: np.ndarray
+    y_scale: np.ndarray
+    fs: float
+    degrees: tuple[int, ...]
+    structure: str
+    n_transient: int = 0
+    history_: list[LMIteration] = field(default_factory=list)
+    cost_: float = float("nan")
+    cost_val_: float = float("nan")
+
+    def __post_init__(self) -> None:
+        for name in ("A", "B", "C", "D", "E", "F"):
+            setattr(self, name, np.ascontiguousarray(np.asarray(getattr(self, name), float)))
+        nx, nu, ny = self.A.shape[0], self.B.shape[1], self.C.shape[0]
+        self.exponents_state = np.ascontiguousarray(
+            np.asarray(self.exponents_state, dtype=np.int64).reshape(-1, nx + nu)
+        )
+        self.exponents_output = np.ascontiguousarray(
+            np.asarray(self.exponents_output, dtype=np.int64).reshape(-1, nx + nu)
+        )
+        expect = {
+            "A": (nx, nx), "B": (nx, nu), "C": (ny, nx), "D": (ny, nu),
+            "E": (nx, self.exponents_state.shape[0]), "F": (ny, self.exponents_output.shape[0]),
+        }  # fmt: skip
+        for name, shape in expect.items():
+            if getattr(self, name).shape != shape:
+                raise ValueError(
+                    f"PNLSS matrix {name} has shape {getattr(self, name).shape}; expected {shape}"
+                )
+        for name, n in (("u_mean", nu), ("u_scale", nu), ("y_mean", ny), ("y_scale", ny)):
+            v = np.asarray(getattr(self, name), dtype=float).reshape(-1)
+            if v.size != n:
+                raise ValueError(f"{name} must have {n} entries; got {v.size}")
+            setattr(self, name, v)
+        self.fs = float(self.fs)
+        self.degrees = tuple(int(d) for d in self.degrees)
+
+    @property
+    def nx(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def nu(self) -> int:
+        return int(self.B.shape[1])
+
+    @property
+    def ny(self) -> int:
+        return int(self.C.shape[0])
+
+    @property
+    def parameters(self) -> np.ndarray:
+        """(n_θ,) θ = [vec A, vec B, vec E, vec C, vec D, vec F] (row-major, normalised)."""
+        return np.concatenate([m.ravel() for m in (self.A, self.B, self.E, self.C, self.D, self.F)])
+
+    def simulate(self, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+        """Simulate the output for the input u (absolute signals).
+
+        Args:
+            u: (T,) or (T, nu) input samples.
+            x0: (nx,) initial normalised state; default 0 (the operating point).
+
+        Returns:
+            (T,) output for a 1-D u and ny == 1, else (T, ny). Samples after a divergence
+            (a normalised state beyond STATE_BOUND) are NaN.
+        """
+        u2, one_d = _as_input(u, self.nu)
+        x = np.zeros(self.nx) if x0 is None else np.asarray(x0, dtype=float).reshape(self.nx)
+        un = (u2 - self.u_mean) / self.u_scale
+        yn = simulate_records(
+            self.A, self.B, self.C, self.D, self.E, self.F, self.exponents_state,
+            self.exponents_output, un[None], x[None], STATE_BOUND,
+        )[0]  # fmt: skip
+        y = self.y_mean + self.y_scale * yn
+        return y[:, 0] if (one_d and self.ny == 1) else y
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dictionary of the model (json.dumps works); inverse of `from_dict`."""
+        return {
+            "kind": "pnlss",
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "D": self.D.tolist(),
+            "E": self.E.tolist(),
+            "F": self.F.tolist(),
+            "exponents_state": self.exponents_state.tolist(),
+            "exponents_output": self.exponents_output.tolist(),
+            "u_mean": self.u_mean.tolist(),
+            "u_scale": self.u_scale.tolist(),
+            "y_mean": self.y_mean.tolist(),
+            "y_scale": self.y_scale.tolist(),
+            "fs": self.fs,
+            "degrees": list(self.degrees),
+            "structure": self.structure,
+            "n_transient": int(self.n_transient),
+            "cost": _json_float(self.cost_),
+            "cost_val": _json_float(self.cost_val_),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "PNLSSModel":
+        """Rebuild a model from `to_dict` output."""
+        if d.get("kind") != "pnlss":
+            raise ValueError(
+                f"not a PNLSS dictionary (kind={d.get('kind')!r}); expected the output of "
+                "PNLSSModel.to_dict()"
+            )
+        nx = len(d["A"])
+        ny = len(d["C"])
+        return cls(
+            A=np.asarray(d["A"], float).reshape(nx, nx),
+            B=np.asarray(d["B"], float).reshape(nx, -1),
+            C=np.asarray(d["C"], float).reshape(ny, nx),
+            D=np.asarray(d["D"], float).reshape(ny, -1),
+            E=np.asarray(d["E"], float).reshape(nx, -1),
+            F=np.asarray(d["F"], float).reshape(ny, -1),
+            exponents_state=np.asarray(d["exponents_state"], np.int64),
+            exponents_output=np.asarray(d["exponents_output"], np.int64),
+            u_mean=np.asarray(d["u_mean"]), u_scale=np.asarray(d["u_scale"]),
+            y_mean=np.asarray(d["y_mean"]), y_scale=np.asarray(d["y_scale"]),
+            fs=d["fs"], degrees=tuple(d["degrees"]), structure=d["structure"],
+            n_transient=d.get("n_transient", 0),
+            cost_=_from_json_float(d.get("cost")), cost_val_=_from_json_float(d.get("cost_val")),
+        )  # fmt: skip
+
+
+def _json_float(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+def _from_json_float(v: float | None) -> float:
+    return float("nan") if v is None else float(v)
+
+
+# --- parameter vector -----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Layout:
+    nx: int
+    nu: int
+    ny: int
+    Kz: int
+    Ke: int
+    fit_offset: bool
+
+    @property
+    def sizes(self) -> list[tuple[str, tuple[int, int]]]:
+        s = [
+            ("A", (self.nx, self.nx)), ("B", (self.nx, self.nu)), ("E", (self.nx, self.Kz)),
+            ("C", (self.ny, self.nx)), ("D", (self.ny, self.nu)), ("F", (self.ny, self.Ke)),
+        ]  # fmt: skip
+        if self.fit_offset:
+            s.append(("offset", (self.ny, 1)))
+        return s
+
+    @property
+    def n_par(self) -> int:
+        return sum(a * b for _, (a, b) in self.sizes)
+
+    def pack(self, mats: dict[str, np.ndarray]) -> np.ndarray:
+        return np.concatenate([np.asarray(mats[k], float).ravel() for k, _ in self.sizes])
+
+    def unpack(self, theta: np.ndarray) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        i = 0
+        for k, (a, b) in self.sizes:
+            out[k] = np.ascontiguousarray(theta[i : i + a * b].reshape(a, b))
+            i += a * b
+        if not self.fit_offset:
+            out["offset"] = np.zeros((self.ny, 1))
+        return out
+
+
+# --- frequency-domain weighting -------------------------------------------------------------
+
+
+def _pack_spectrum(e: np.ndarray, sqrt_w: np.ndarray) -> np.ndarray:
+    """Weighted real packing of the DFT of period records, Parseval-exact for unit weights.
+
+    Args:
+        e: (..., N, ny) real time records (N along axis -2).
+        sqrt_w: (N//2+1, ny) square roots of the per-bin weights.
+
+    Returns:
+        (..., N, ny) real: [Re E_0 … Re E_⌊N/2⌋, Im E_1 … Im E_(last interior)] scaled so that
+        Σ out² = Σ_k c_k w_k |E_k|² / N with c_k = 1 for DC and Nyquist, 2 otherwise
+        (= Σ e² when w ≡ 1).
+    """
+    N = e.shape[-2]
+    nr = N // 2 + 1
+    n_im = N - nr
+    E = np.fft.rfft(e, axis=-2) * sqrt_w
+    fac = np.full(nr, math.sqrt(2.0 / N))
+    fac[0] = 1.0 / math.sqrt(N)
+    if N % 2 == 0:
+        fac[-1] = 1.0 / math.sqrt(N)
+    out = np.empty(e.shape)
+    out[..., :nr, :] = E.real * fac[:, None]
+    out[..., nr:, :] = E.imag[..., 1 : 1 + n_im, :] * math.sqrt(2.0 / N)
+    return out
+
+
+def _noise_weights(y_n: np.ndarray) -> np.ndarray:
+    """(N//2+1, 1) weights 1/σ²_Y(k) from the period-to-period variance of the output DFT.
+
+    Args:
+        y_n: (N, P, M) normalised outputs; P >= 2 needed.
+    """
+    P = y_n.shape[1]
+    if P < 2:
+        raise ValueError(
+            "weighting='noise' estimates the output noise variance over periods and needs "
+            f"P >= 2 periods per realization; got P={P}. Use weighting=None."
+        )
+    Y = np.fft.rfft(y_n, axis=0)
+    var = np.mean(np.var(Y, axis=1, ddof=1), axis=1)  # (N//2+1,) mean over realizations
+    if not np.all(var > 0):
+        raise ValueError(
+            "the output noise variance is zero at some DFT bins (noise-free data?); use "
+            "weighting=None or pass explicit weights"
+        )
+    return (1.0 / var)[:, None]
+
+
+def _normalise_weights(w: np.ndarray, N: int) -> np.ndarray:
+    """Scale per-bin weights so a uniform error gives the same cost as unit weights."""
+    c = np.full(N // 2 + 1, 2.0)
+    c[0] = 1.0
+    if N % 2 == 0:
+        c[-1] = 1.0
+    return w * (N / np.sum(c[:, None] * w, axis=0))
+
+
+# --- the fit --------------------------------------------------------------------------------
+
+
+def default_transient(A: np.ndarray, N: int, decay: float = 1e-4) -> int:
+    """Samples for the slowest mode of A to decay to `decay`, capped at one period N."""
+    rho = float(np.max(np.abs(np.linalg.eigvals(A)))) if A.size else 0.0
+    if rho <= 0.0:
+        return 1
+    if rho >= 1.0:
+        return N
+    return int(min(N, max(1, math.ceil(math.log(decay) / math.log(rho)))))
+
+
+def _initial_from_linear(
+    lin: LinearStateSpace, u_rec: np.ndarray, u_scale: np.ndarray, y_scale: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Linear model in normalised coordinates, states scaled to unit RMS on the training input."""
+    if not lin.is_stable():
+        raise ValueError(
+            "the initial linear model is unstable; fit it with fit_linear_ss (stable by "
+            "construction) or stabilise it first"
+        )
+    A = lin.A.copy()
+    B = lin.B * u_scale[None, :]
+    C = lin.C / y_scale[:, None]
+    D = lin.D * u_scale[None, :] / y_scale[:, None]
+    nx = A.shape[0]
+    empty = np.zeros((0, nx + lin.nu), dtype=np.int64)
+    # States as outputs (C = I, D = 0) to measure their RMS on the training records.
+    x = simulate_records(
+        A, np.ascontiguousarray(B), np.eye(nx), np.zeros((nx, lin.nu)), np.zeros((nx, 0)),
+        np.zeros((nx, 0)), empty, empty, u_rec, np.zeros((u_rec.shape[0], nx)), np.inf,
+    )  # fmt: skip
+    std = np.sqrt(np.mean(x.reshape(-1, nx) ** 2, axis=0))
+    std[~(std > 0)] = 1.0
+    return {
+        "A": A * std[None, :] / std[:, None],  # T⁻¹ A T with T = diag(std)
+        "B": B / std[:, None],
+        "C": C * std[None, :],
+        "D": D,
+    }
+
+
+def fit_pnlss(
+    data: PeriodicData,
+    lin: LinearStateSpace,
+    degrees: Sequence[int] = (2, 3),
+    structure: str = "full",
+    max_iter: int = 100,
+    validation: tuple[np.ndarray, np.ndarray] | None = None,
+    *,
+    n_transient: int | None = None,
+    weighting: str | np.ndarray | None = None,
+    fit_offset: bool = True,
+    lambda_init: float = 1.0,
+    initial_model: PNLSSModel | None = None,
+) -> PNLSSModel:
+    """Fit a PNLSS model to periodic data by Levenberg–Marquardt (module docstring).
+
+    Args:
+        data: PeriodicData with u, y of shape (N, P, M); every period is a training record.
+        lin: the initial linear model (A, B, C, D are used; its operating point is replaced by
+            the training-data means).
+        degrees: total degrees of the monomials (each >= 2), e.g. (2, 3).
+        structure: "full", "statesonly" or "inputsonly" (monomials.py).
+        max_iter: number of LM trials (accepted or rejected).
+        validation: (u_val, y_val), 1-D records of equal length in absolute units. The first
+            n_transient samples are left out of the validation error (the simulation starts at
+            the operating point). Used for the divergence guard and to choose the returned model.
+        n_transient: samples prepended to each record; default: the decay time of the slowest
+            linear mode to 1e-4 (at most one period).
+        weighting: None (time-domain cost), "noise" (1/σ²_Y(k) per DFT bin, from the periods;
+            needs P >= 2) or an explicit (N//2+1,) array of non-negative per-bin weights.
+        fit_offset: estimate the output offset (the model output at the operating point).
+        lambda_init: initial damping relative to the largest singular value of the normalised
+            Jacobian (1 = PNLSS toolbox default; a tiny value makes the first steps Gauss–Newton).
+        initial_model: start from this PNLSS model instead of `lin` (its normalisation,
+            degrees and structure are kept; `lin` is then only used for n_transient).
+
+    Returns:
+        The PNLSSModel with `history_`, `cost_`, `cost_val_`.
+
+    Raises:
+        ValueError: for inconsistent data, arguments or a diverging initial model.
+    """
+    if not isinstance(data, PeriodicData):
+        raise TypeError(f"data must be a PeriodicData (N, P, M) record; got {type(data).__name__}")
+    if max_iter < 0:
+        raise ValueError(f"max_iter must be >= 0; got {max_iter}")
+    if lin.nu != 1 or lin.ny != 1:
+        raise ValueError(
+            f"PeriodicData is SISO but the linear model has nu={lin.nu}, ny={lin.ny}; fit a "
+            "SISO linear model"
+        )
+    N, P, M = data.u.shape
+    R = P * M
+    nx = lin.nx if initial_model is None else initial_model.nx
+    nu = ny = 1
+
+    # Normalisation and monomials.
+    if initial_model is not None:
+        u_mean, u_scale = initial_model.u_mean, initial_model.u_scale
+        y_mean, y_scale = initial_model.y_mean, initial_model.y_scale
+        exp_state, exp_output = initial_model.exponents_state, initial_model.exponents_output
+        degrees_t, structure = initial_model.degrees, initial_model.structure
+    else:
+        if structure not in STRUCTURES:
+            raise ValueError(f"unknown PNLSS structure {structure!r}; choose one of {STRUCTURES}")
+        degrees_t = check_degrees(degrees)
+        u_mean = np.atleast_1d(np.mean(data.u))
+        y_mean = np.atleast_1d(np.mean(data.y))
+        u_scale = np.atleast_1d(np.std(data.u))
+        y_scale = np.atleast_1d(np.std(data.y))
+        if not (u_scale[0] > 0 and y_scale[0] > 0):
+            raise ValueError(
+                "training input or output is constant (zero standard deviation); an "
+                "excited record is needed to fit a PNLSS model"
+            )
+        exp_state = structure_exponents(nx, nu, degrees_t, structure)
+        exp_output = exp_state.copy()
+    Kz, Ke = exp_state.shape[0], exp_output.shape[0]
+
+    # Records: each period, with the tail of its own input prepended (periodic steady state).
+    nt = default_transient(lin.A, N) if n_transient is None else int(n_transient)
+    if nt < 0:
+        raise ValueError(f"n_transient must be >= 0; got {nt}")
+    u_per = ((data.u - u_mean[0]) / u_scale[0]).transpose(2, 1, 0).reshape(R, N)
+    y_per = ((data.y - y_mean[0]) / y_scale[0]).transpose(2, 1, 0).reshape(R, N)
+    tail = np.arange(-nt, 0) % N
+    u_rec = np.ascontiguousarray(np.concatenate([u_per[:, tail], u_per], axis=1)[:, :, None])
+    y_rec = np.ascontiguousarray(y_per[:, :, None])
+    x0_rec = np.zeros((R, nx))
+
+    # Validation record.
+    if validation is not None:
+        u_val, y_val = (np.asarray(v, dtype=float).reshape(-1) for v in validation)
+        if u_val.shape != y_val.shape:
+            raise ValueError(
+                f"validation u and y must have the same length; got {u_val.size}, {y_val.size}"
+            )
+        if u_val.size <= nt or not (np.all(np.isfinite(u_val)) and np.all(np.isfinite(y_val))):
+            raise ValueError(
+                f"the validation record must be finite and longer than n_transient={nt} "
+                f"samples; got {u_val.size} samples"
+            )
+        u_val_n = np.ascontiguousarray(((u_val - u_mean[0]) / u_scale[0])[None, :, None])
+        y_val_tail = y_val[nt:]
+
+    # Weighting.
+    sqrt_w: np.ndarray | None = None
+    if isinstance(weighting, str):
+        if weighting != "noise":
+            raise ValueError(f"unknown weighting {weighting!r}; use None, 'noise' or an array")
+        w = _noise_weights((data.y - y_mean[0]) / y_scale[0])
+    elif weighting is not None:
+        w = np.asarray(weighting, dtype=float).reshape(-1, 1)
+        if w.shape[0] != N // 2 + 1 or np.any(w < 0) or not np.all(np.isfinite(w)):
+            raise ValueError(
+                f"weighting must be N//2+1={N // 2 + 1} finite non-negative per-bin weights; "
+                f"got shape {np.shape(weighting)}"
+            )
+    if weighting is not None:
+        sqrt_w = np.sqrt(_normalise_weights(w, N))
+
+    layout = _Layout(nx, nu, ny, Kz, Ke, fit_offset)
+    if initial_model is not None:
+        mats = {k: getattr(initial_model, k) for k in "ABCDEF"}
+    else:
+        mats = _initial_from_linear(lin, u_rec, u_scale, y_scale)
+        mats["E"] = np.zeros((nx, Kz))
+        mats["F"] = np.zeros((ny, Ke))
+    mats["offset"] = np.zeros((ny, 1))
+    theta = layout.pack(mats)
+    n_par = layout.n_par
+    n_rows = R * N * ny
+    if n_rows <= n_par:
+        raise ValueError(f"{n_rows} samples are too few for {n_par} parameters")
+
+    def simulate(th: np.ndarray, u: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        m = layout.unpack(th)
+        y = simulate_records(
+            m["A"], m["B"], m["C"], m["D"], m["E"], m["F"], exp_state, exp_output, u, x0,
+            STATE_BOUND,
+        )  # fmt: skip
+        return y + m["offset"][:, 0]
+
+    def residual(y_sim: np.ndarray) -> np.ndarray:
+        e = y_sim[:, nt:, :] - y_rec
+        return e if sqrt_w is None else _pack_spectrum(e, sqrt_w)
+
+    def train_cost(th: np.ndarray) -> float:
+        e = residual(simulate(th, u_rec, x0_rec))
+        c = float(np.mean(e * e))
+        return c if math.isfinite(c) else math.inf
+
+    def val_cost(th: np.ndarray) -> float:
+        if validation is None:
+            return math.nan
+        y = y_mean[0] + y_scale[0] * simulate(th, u_val_n, np.zeros((1, nx)))[0, nt:, 0]
+        c = float(np.mean((y - y_val_tail) ** 2))
+        return c if math.isfinite(c) else math.inf
+
+    cost = train_cost(theta)
+    cost_val = val_cost(theta)
+    if not math.isfinite(cost):
+        raise ValueError("the initial model diverges on the training data; check lin and data")
+    history = [LMIteration(0, cost, cost_val, math.nan, True)]
+    best = (cost_val if validation is not None else cost, theta, cost, cost_val)
+
+    # One Jacobian buffer [J | e], Fortran order so the QR works in place (memory: n_rows ×
+    # (n_par + 1) float64, once).
+    J = np.empty((n_rows, n_par + 1), order="F") if max_iter > 0 else np.empty((0, 0))
+    lam_rel = float(lambda_init)
+    need_jacobian = True
+    rank_cap = n_par - nx * nx
+    V = s = g = col_norm = np.empty(0)
+    # Small dense algebra (58×58 SVD) is slowed down badly by BLAS threads competing with the
+    # numba threads on a busy 2-core machine; one BLAS thread is faster and predictable.
+    with _blas_threads(1):
+        for it in range(1, max_iter + 1):
+            if need_jacobian:
+                m = layout.unpack(theta)
+                ok = jacobian_records(
+                    m["A"], m["B"], m["C"], m["D"], m["E"], m["F"], exp_state, exp_output, u_rec,
+                    y_rec, nt, m["offset"][:, 0].copy(), fit_offset, STATE_BOUND, J,
+                )  # fmt: skip
+                if not np.all(ok):
+                    raise RuntimeError("internal error: an accepted model diverged in the Jacobian")
+                if sqrt_w is not None:
+                    _pack_columns_in_place(J, R, N, ny, sqrt_w)
+                col_norm = np.array(
+                    [math.sqrt(float(np.dot(J[:, j], J[:, j]))) for j in range(n_par)]
+                )
+                col_norm[~(col_norm > 0)] = 1.0  # a parameter without effect: left unscaled
+                for j in range(n_par):
+                    J[:, j] /= col_norm[j]
+                # QR of [J e] in place: J = Q R and Qᵀe in the last column; SVD of the small R.
+                (_, _), Raug = scipy.linalg.qr(J, mode="raw", overwrite_a=True, check_finite=False)
+                Ur, s, Vt = np.linalg.svd(Raug[:n_par, :n_par])
+                g = Ur.T @ Raug[:n_par, n_par]  # Uᵀe
+                V = Vt.T
+                tol = s[0] * n_rows * np.finfo(float).eps
+                keep = min(rank_cap, int(np.sum(s > tol)))
+                V, s, g = V[:, :keep], s[:keep], g[:keep]
+                need_jacobian = False
+            lam = lam_rel * s[0]
+            step = -(V @ (s / (s * s + lam * lam) * g)) / col_norm
+            trial = theta + step
+            c_tr = train_cost(trial)
+            cv_tr = val_cost(trial)
+            accepted = c_tr < cost and (validation is None or math.isfinite(cv_tr))
+            history.append(LMIteration(it, c_tr, cv_tr, lam_rel, accepted))
+            if accepted:
+                theta, cost, cost_val = trial, c_tr, cv_tr
+                crit = cost_val if validation is not None else cost
+                if crit <= best[0]:
+                    best = (crit, theta, cost, cost_val)
+                lam_rel /= 2.0  # PNLSS toolbox schedule: halve on success, ×√10 on failure
+                need_jacobian = True
+            else:
+                lam_rel *= math.sqrt(10.0)
+                if lam_rel > 1e12:  # every direction damped away: no further progress possible
+                    break
+
+    _, theta_best, cost_best, cost_val_best = best
+    m = layout.unpack(theta_best)
+    return PNLSSModel(
+        A=m["A"], B=m["B"], C=m["C"], D=m["D"], E=m["E"], F=m["F"],
+        exponents_state=exp_state, exponents_output=exp_output, u_mean=u_mean, u_scale=u_scale,
+        y_mean=y_mean + y_scale * m["offset"][:, 0], y_scale=y_scale, fs=data.fs,
+        degrees=degrees_t, structure=structure, n_transient=nt, history_=history,
+        cost_=cost_best, cost_val_=cost_val_best,
+    )  # fmt: skip
+
+
+def _pack_columns_in_place(J: np.ndarray, R: int, N: int, ny: int, sqrt_w: np.ndarray) -> None:
+    """Replace every column of J (rows record-major) by its weighted DFT packing, in chunks."""
+    chunk = 8
+    for c0 in range(0, J.shape[1], chunk):
+        c1 = min(J.shape[1], c0 + chunk)
+        block = J[:, c0:c1].T.reshape(c1 - c0, R, N, ny)  # a view of F-ordered columns
+        block[...] = _pack_spectrum(block, sqrt_w)

@@ -1,0 +1,560 @@
+"""Linear state-space model of the BLA by frequency-domain subspace identification.
+
+Algorithm: McKelvey, Akçay & Ljung, "Subspace-based multivariable system identification from
+frequency response data", IEEE TAC 41(7) 1996 (FSID), discrete time z_k = exp(j2π k/N), with
+the noise weighting of Pintelon, "Frequency-domain subspace system identification using
+non-parametric noise models", Automatica 38 2002: the projected data are whitened by the
+covariance implied by the nonparametric variance of G before the SVD, and B, D are fitted by
+variance-weighted least squares.
+
+Cost (the criterion for choosing order n and block rows r, and of the optional refinement):
+
+    V = Σ_k |G_model(z_k) − G_BLA(k)|² / var(k)
+
+with var the variance of the mean BLA (`BLA.var_total` by default: noise plus stochastic
+nonlinear distortions, the right weighting for a BLA; Pintelon & Schoukens 2012, §9.4).
+
+Models returned are always stable (all eigenvalues of A inside the unit circle): unstable
+eigenvalues of a candidate are reflected into the unit circle (z ↦ 1/z̄, which keeps the
+magnitude response shape) and B, D re-fitted; a refinement that ends unstable is discarded.
+
+Operating-point convention (the same in pnlss.py): a model maps deviations around the
+operating point, y − y_mean = G (u − u_mean). `simulate(u)` takes and returns absolute
+signals. A BLA carries no DC information, so `fit_linear_ss` returns u_mean = y_mean = 0; set
+them from the training data with `with_operating_point` before simulating absolute signals.
+"""
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from aero_identification.bla import BLA
+
+# Largest eigenvalue modulus accepted for a "stable" model; reflected/clipped poles land at or
+# below it (a pole on the unit circle would be an integrator, not identifiable from the BLA).
+MAX_POLE_RADIUS = 0.9999
+
+
+@dataclass(eq=False)
+class LinearStateSpace:
+    """Discrete-time linear state-space model x(t+1) = A x + B u, y = C x + D u.
+
+    Attributes:
+        A: (nx, nx) state matrix (all eigenvalues inside the unit circle).
+        B: (nx, nu) input matrix.
+        C: (ny, nx) output matrix.
+        D: (ny, nu) feed-through.
+        fs: sampling frequency [Hz]; z = exp(j2π f/fs).
+        order: nx.
+        r: block rows used by the subspace step (0 if not from subspace).
+        cost: variance-weighted cost Σ|G_model − G|²/var on the data it was selected on (the
+            BLA, or the validation BLA when one was given).
+        u_mean: (nu,) input operating point (deviation convention in the module docstring).
+        y_mean: (ny,) output operating point.
+        refined: whether the weighted least-squares refinement was kept.
+        weighting: which variance weighted the fit: "total", "noise" or "none".
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    fs: float
+    order: int
+    r: int = 0
+    cost: float = float("nan")
+    u_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    y_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    refined: bool = False
+    weighting: str = "none"
+
+    def __post_init__(self) -> None:
+        self.A = np.atleast_2d(np.asarray(self.A, dtype=float))
+        self.B = np.atleast_2d(np.asarray(self.B, dtype=float))
+        self.C = np.atleast_2d(np.asarray(self.C, dtype=float))
+        self.D = np.atleast_2d(np.asarray(self.D, dtype=float))
+        nx, nu, ny = self.A.shape[0], self.B.shape[1], self.C.shape[0]
+        if self.A.shape != (nx, nx) or self.B.shape[0] != nx or self.C.shape[1] != nx:
+            raise ValueError(
+                f"inconsistent state-space shapes A {self.A.shape}, B {self.B.shape}, "
+                f"C {self.C.shape}; need (nx, nx), (nx, nu), (ny, nx)"
+            )
+        if self.D.shape != (ny, nu):
+            raise ValueError(f"D must have shape (ny, nu)={(ny, nu)}; got {self.D.shape}")
+        self.u_mean = _operating_point(self.u_mean, nu, "u_mean")
+        self.y_mean = _operating_point(self.y_mean, ny, "y_mean")
+        self.order = nx
+        self.fs = float(self.fs)
+
+    @property
+    def nx(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def nu(self) -> int:
+        return int(self.B.shape[1])
+
+    @property
+    def ny(self) -> int:
+        return int(self.C.shape[0])
+
+    def poles(self) -> np.ndarray:
+        """(nx,) complex eigenvalues of A (discrete-time poles)."""
+        return np.linalg.eigvals(self.A)
+
+    def is_stable(self) -> bool:
+        """True when every pole lies strictly inside the unit circle."""
+        return bool(np.all(np.abs(self.poles()) < 1.0))
+
+    def with_operating_point(self, u_mean: Any, y_mean: Any) -> "LinearStateSpace":
+        """Copy of the model with the operating point (e.g. training-data means) set."""
+        return LinearStateSpace(
+            A=self.A.copy(), B=self.B.copy(), C=self.C.copy(), D=self.D.copy(), fs=self.fs,
+            order=self.order, r=self.r, cost=self.cost, u_mean=np.atleast_1d(u_mean),
+            y_mean=np.atleast_1d(y_mean), refined=self.refined, weighting=self.weighting,
+        )  # fmt: skip
+
+    def frf(self, freq_hz: np.ndarray) -> np.ndarray:
+        """Frequency response G(z) = C (zI − A)⁻¹ B + D at z = exp(j2π f/fs).
+
+        Args:
+            freq_hz: (F,) frequencies [Hz].
+
+        Returns:
+            (F,) complex for a SISO model, (F, ny, nu) otherwise.
+        """
+        z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float).reshape(-1) / self.fs)
+        G = _frf(self.A, self.B, self.C, self.D, z)
+        return G[:, 0, 0] if (self.ny == 1 and self.nu == 1) else G
+
+    def simulate(self, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+        """Simulate the output for the input u (absolute signals, see the module docstring).
+
+        Args:
+            u: (T,) or (T, nu) input samples.
+            x0: (nx,) initial state (deviation from the operating point); default 0.
+
+        Returns:
+            (T,) output for a 1-D u and ny == 1, else (T, ny).
+        """
+        from aero_identification.pnlss_kernels import simulate_records
+
+        u2, one_d = _as_input(u, self.nu)
+        x = np.zeros(self.nx) if x0 is None else np.asarray(x0, dtype=float).reshape(self.nx)
+        empty_exp = np.zeros((0, self.nx + self.nu), dtype=np.int64)
+        y = simulate_records(
+            self.A, self.B, self.C, self.D, np.zeros((self.nx, 0)), np.zeros((self.ny, 0)),
+            empty_exp, empty_exp, (u2 - self.u_mean)[None], x[None], np.inf,
+        )[0] + self.y_mean  # fmt: skip
+        return y[:, 0] if (one_d and self.ny == 1) else y
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dictionary (json.dumps works); inverse of `from_dict`."""
+        return {
+            "kind": "linear_state_space",
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "D": self.D.tolist(),
+            "fs": self.fs,
+            "order": self.order,
+            "r": int(self.r),
+            "cost": float(self.cost) if math.isfinite(self.cost) else None,
+            "u_mean": self.u_mean.tolist(),
+            "y_mean": self.y_mean.tolist(),
+            "refined": bool(self.refined),
+            "weighting": self.weighting,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "LinearStateSpace":
+        """Rebuild a model from `to_dict` output."""
+        if d.get("kind") != "linear_state_space":
+            raise ValueError(
+                f"not a linear state-space dictionary (kind={d.get('kind')!r}); expected "
+                "the output of LinearStateSpace.to_dict()"
+            )
+        return cls(
+            A=np.asarray(d["A"], dtype=float).reshape(len(d["A"]), -1),
+            B=np.asarray(d["B"], dtype=float).reshape(len(d["A"]), -1),
+            C=np.asarray(d["C"], dtype=float).reshape(-1, len(d["A"])),
+            D=np.asarray(d["D"], dtype=float),
+            fs=d["fs"], order=d["order"], r=d["r"],
+            cost=float("nan") if d["cost"] is None else d["cost"],
+            u_mean=np.asarray(d["u_mean"]), y_mean=np.asarray(d["y_mean"]),
+            refined=d["refined"], weighting=d["weighting"],
+        )  # fmt: skip
+
+
+def _operating_point(value: Any, n: int, name: str) -> np.ndarray:
+    v = np.asarray(value, dtype=float).reshape(-1)
+    if v.size == 0:
+        return np.zeros(n)
+    if v.size != n:
+        raise ValueError(f"{name} must have {n} entries (one per signal); got {v.size}")
+    return v
+
+
+def _as_input(u: np.ndarray, nu: int) -> tuple[np.ndarray, bool]:
+    """(T, nu) float64 C-contiguous input, and whether the caller gave a 1-D array."""
+    u = np.asarray(u, dtype=float)
+    one_d = u.ndim == 1
+    u2 = u[:, None] if one_d else u
+    if u2.ndim != 2 or u2.shape[1] != nu:
+        raise ValueError(f"u must have shape (T,) or (T, nu) with nu={nu}; got {u.shape}")
+    if not np.all(np.isfinite(u2)):
+        raise ValueError("u contains NaN or inf; clean the input record before simulating")
+    return np.ascontiguousarray(u2), one_d
+
+
+# --- frequency-response helpers -------------------------------------------------------------
+
+
+def _resolvents(A: np.ndarray, B: np.ndarray, C: np.ndarray, z: np.ndarray):
+    """L = C (zI − A)⁻¹ (F, ny, nx) and R = (zI − A)⁻¹ B (F, nx, nu)."""
+    nx = A.shape[0]
+    Zi = z[:, None, None] * np.eye(nx)[None] - A[None]
+    R = np.linalg.solve(Zi, np.broadcast_to(B.astype(complex), (z.size, *B.shape)))
+    L = np.swapaxes(
+        np.linalg.solve(np.swapaxes(Zi, 1, 2), np.broadcast_to(C.T.astype(complex),
+                                                               (z.size, *C.T.shape))), 1, 2
+    )  # fmt: skip
+    return L, R
+
+
+def _frf(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(F, ny, nu) G(z_k) = C (z_k I − A)⁻¹ B + D."""
+    nx = A.shape[0]
+    if nx == 0:
+        return np.broadcast_to(D.astype(complex), (z.size, *D.shape)).copy()
+    Zi = z[:, None, None] * np.eye(nx)[None] - A[None]
+    R = np.linalg.solve(Zi, np.broadcast_to(B.astype(complex), (z.size, *B.shape)))
+    return C[None] @ R + D[None]
+
+
+def weighted_cost(G_model: np.ndarray, G: np.ndarray, var: np.ndarray) -> float:
+    """V = Σ |G_model − G|² / var over lines (and matrix entries)."""
+    return float(np.sum(np.abs(G_model - G) ** 2 / var))
+
+
+# --- the subspace step ----------------------------------------------------------------------
+
+
+def frequency_domain_subspace(
+    z: np.ndarray, G: np.ndarray, var: np.ndarray, order: int, r: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One weighted FSID estimate of (A, B, C, D) from FRF samples (McKelvey 1996, Pintelon 2002).
+
+    Args:
+        z: (F,) complex points on the unit circle, exp(j2π k/N).
+        G: (F, ny, nu) complex FRF samples.
+        var: (F, ny, nu) positive variances of G (ones for an unweighted fit).
+        order: model order n.
+        r: block rows, r > n.
+
+    Returns:
+        A (n, n), B (n, nu), C (ny, n), D (ny, nu), real; A not necessarily stable.
+
+    Raises:
+        ValueError: if r <= n or there are too few lines for r block rows.
+    """
+    F, ny, nu = G.shape
+    if r <= order:
+        raise ValueError(f"block rows r={r} must exceed the order n={order}")
+    if 2 * F * nu < r * (nu + ny):
+        raise ValueError(
+            f"{F} lines are too few for r={r} block rows (need 2·F·nu >= r·(nu+ny)); lower r "
+            "or the order"
+        )
+    Wr = z[None, :] ** np.arange(r)[:, None]  # (r, F), McKelvey's W_r(z_k)
+    # Column block k of the data: W_r(z_k) ⊗ G_k and W_r(z_k) ⊗ I (McKelvey 1996, eq. (9)).
+    # Rows (a, i) = (block a, output i), columns (k, j) = (line k, input j).
+    Gbig = (Wr[:, None, :, None] * G.transpose(1, 0, 2)[None]).reshape(r * ny, F * nu)
+    Wbig = (Wr[:, None, :, None] * np.eye(nu)[None, :, None, :]).reshape(r * nu, F * nu)
+    Z = np.vstack([Wbig, Gbig])
+    Zr = np.hstack([Z.real, Z.imag])  # real data, both signs of frequency (McKelvey §III)
+    Rq = scipy.linalg.qr(Zr.T, mode="r")[0]
+    L22 = Rq[r * nu : r * (nu + ny), r * nu : r * (nu + ny)].T  # G Π⊥_W = L22 Q2ᵀ
+    # Noise covariance of the projected rows (Pintelon 2002, eq. (24)): Σ_k Re(W Wᴴ ⊗ C_G,k).
+    CN = np.zeros((r * ny, r * ny))
+    for j in range(nu):
+        for i in range(ny):
+            WW = (Wr * var[None, :, i, j]) @ Wr.conj().T  # Σ_k var_k W_r(z_k) W_r(z_k)ᴴ
+            sel = np.arange(r) * ny + i
+            CN[np.ix_(sel, sel)] += WW.real
+    CN /= np.trace(CN) / CN.shape[0]
+    Kc = np.linalg.cholesky(CN + 1e-12 * np.eye(CN.shape[0]))
+    U, _, _ = np.linalg.svd(scipy.linalg.solve_triangular(Kc, L22, lower=True))
+    Ob = Kc @ U[:, :order]  # extended observability matrix O_r
+    C = Ob[:ny, :]
+    A = np.linalg.lstsq(Ob[:-ny, :], Ob[ny:, :], rcond=None)[0]  # shift invariance
+    B, D = fit_b_d(A, C, z, G, var)
+    return A, B, C, D
+
+
+def fit_b_d(
+    A: np.ndarray, C: np.ndarray, z: np.ndarray, G: np.ndarray, var: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted least-squares B, D for fixed A, C: G_k = C (z_k I − A)⁻¹ B + D is linear in B, D.
+
+    Args:
+        A: (n, n); C: (ny, n); z: (F,); G, var: (F, ny, nu).
+
+    Returns:
+        B (n, nu), D (ny, nu).
+    """
+    F, ny, nu = G.shape
+    n = A.shape[0]
+    L, _ = _resolvents(A, np.zeros((n, nu)), C, z)  # (F, ny, n)
+    Phi = np.concatenate([L, np.broadcast_to(np.eye(ny), (F, ny, ny))], axis=2)  # (F, ny, n+ny)
+    B = np.empty((n, nu))
+    D = np.empty((ny, nu))
+    for j in range(nu):
+        w = 1.0 / np.sqrt(var[:, :, j])  # (F, ny)
+        Pw = (Phi * w[:, :, None]).reshape(F * ny, n + ny)
+        gw = (G[:, :, j] * w).reshape(F * ny)
+        theta = np.linalg.lstsq(
+            np.vstack([Pw.real, Pw.imag]), np.concatenate([gw.real, gw.imag]), rcond=None
+        )[0]
+        B[:, j] = theta[:n]
+        D[:, j] = theta[n:]
+    return B, D
+
+
+def stabilize(A: np.ndarray, max_radius: float = MAX_POLE_RADIUS) -> np.ndarray:
+    """Reflect eigenvalues outside the unit circle to 1/z̄ and clip them to max_radius.
+
+    Reflection keeps the shape of the magnitude response of each pole (an all-pass factor
+    separates the two); the real structure is kept because conjugate pairs map to conjugate
+    pairs.
+
+    Args:
+        A: (n, n) real state matrix.
+
+    Returns:
+        (n, n) real state matrix with every eigenvalue modulus <= max_radius (A itself when
+        already so).
+    """
+    lam, V = np.linalg.eig(A)
+    mag = np.abs(lam)
+    if np.all(mag <= max_radius):
+        return A
+    new = lam.copy()
+    out = mag > max_radius
+    new[out] = 1.0 / np.conj(lam[out])
+    big = np.abs(new) > max_radius
+    new[big] = new[big] / np.abs(new[big]) * max_radius
+    As = (V @ np.diag(new) @ np.linalg.inv(V)).real
+    if np.max(np.abs(np.linalg.eigvals(As))) >= 1.0:
+        # V nearly defective: fall back to a uniform contraction, always stable.
+        As = A * (max_radius / np.max(mag)) * max_radius
+    return As
+
+
+# --- refinement -----------------------------------------------------------------------------
+
+
+def _pack(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> np.ndarray:
+    return np.concatenate([A.ravel(), B.ravel(), C.ravel(), D.ravel()])
+
+
+def _unpack(theta: np.ndarray, n: int, nu: int, ny: int):
+    i = 0
+    A = theta[i : i + n * n].reshape(n, n)
+    i += n * n
+    B = theta[i : i + n * nu].reshape(n, nu)
+    i += n * nu
+    C = theta[i : i + ny * n].reshape(ny, n)
+    i += ny * n
+    D = theta[i : i + ny * nu].reshape(ny, nu)
+    return A, B, C, D
+
+
+def refine(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray, G: np.ndarray,
+    var: np.ndarray, max_nfev: int = 200,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Weighted nonlinear least squares on all matrices (Pintelon 2002, §5; full parametrisation).
+
+    Minimises Σ_k |G_model(z_k) − G_k|²/var_k with scipy.optimize.least_squares and the analytic
+    Jacobian ∂G/∂A_ij = C(zI−A)⁻¹ e_i e_jᵀ (zI−A)⁻¹ B. The nx² similarity directions are
+    redundant; the trust-region solver handles the singular Jacobian.
+
+    Returns:
+        Refined (A, B, C, D); may be unstable (the caller checks).
+    """
+    F, ny, nu = G.shape
+    n = A.shape[0]
+    w = 1.0 / np.sqrt(var)
+
+    def residual(theta: np.ndarray) -> np.ndarray:
+        Ai, Bi, Ci, Di = _unpack(theta, n, nu, ny)
+        e = (_frf(Ai, Bi, Ci, Di, z) - G) * w
+        return np.concatenate([e.real.ravel(), e.imag.ravel()])
+
+    def jacobian(theta: np.ndarray) -> np.ndarray:
+        Ai, Bi, Ci, _ = _unpack(theta, n, nu, ny)
+        L, R = _resolvents(Ai, Bi, Ci, z)  # (F, ny, n), (F, n, nu)
+        eye_y, eye_u = np.eye(ny), np.eye(nu)
+        dA = np.einsum("kai,kjb->kabij", L, R).reshape(F, ny, nu, n * n)
+        dB = np.einsum("kai,jb->kabij", L, eye_u).reshape(F, ny, nu, n * nu)
+        dC = np.einsum("ai,kjb->kabij", eye_y, R).reshape(F, ny, nu, ny * n)
+        dD = np.broadcast_to(
+            np.einsum("ai,jb->abij", eye_y, eye_u).reshape(1, ny, nu, ny * nu),
+            (F, ny, nu, ny * nu),
+        ).astype(complex)
+        Jc = np.concatenate([dA, dB, dC, dD], axis=3) * w[..., None]
+        Jc = Jc.reshape(F * ny * nu, -1)
+        return np.vstack([Jc.real, Jc.imag])
+
+    sol = scipy.optimize.least_squares(
+        residual, _pack(A, B, C, D), jac=jacobian, method="trf", x_scale="jac",
+        max_nfev=max_nfev,
+    )  # fmt: skip
+    return _unpack(sol.x, n, nu, ny)
+
+
+# --- the public fit -------------------------------------------------------------------------
+
+
+def _bla_arrays(bla: BLA, weighting: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """z (F,), G (F, 1, 1), var (F, 1, 1) and the weighting actually used."""
+    lines = np.asarray(bla.lines, dtype=float)
+    G = np.asarray(bla.G, dtype=complex).reshape(lines.size, -1)
+    if G.shape[1] != 1:
+        G = G.reshape(lines.size, *np.shape(bla.G)[1:])
+    else:
+        G = G.reshape(lines.size, 1, 1)
+    if not np.all(np.isfinite(G)):
+        raise ValueError("the BLA contains NaN or inf at some lines; re-estimate it")
+    z = np.exp(2j * np.pi * lines / bla.N)
+
+    def usable(v: np.ndarray | None) -> bool:
+        return v is not None and bool(np.all(np.isfinite(v)) and np.all(v > 0))
+
+    choices = {"total": bla.var_total, "noise": bla.var_noise}
+    if weighting == "auto":
+        weighting = next((k for k in ("total", "noise") if usable(choices[k])), "none")
+    if weighting == "none":
+        var = np.ones(G.shape)
+    elif weighting in choices:
+        v = choices[weighting]
+        if not usable(v):
+            raise ValueError(
+                f"BLA.var_{weighting} is not positive and finite at every line (needs M >= 2 "
+                f"realizations for 'total', P >= 2 periods for 'noise'); use weighting='auto' "
+                "or 'none'"
+            )
+        var = np.broadcast_to(np.asarray(v, dtype=float).reshape(lines.size, 1, 1), G.shape)
+    else:
+        raise ValueError(
+            f"unknown weighting {weighting!r}; choose 'auto', 'total', 'noise' or 'none'"
+        )
+    return z, G, np.ascontiguousarray(var), weighting
+
+
+def _block_rows(order: int, F: int, nu: int, ny: int) -> list[int]:
+    """Candidate block rows r for an order: n+1 … 2n+4, as far as the lines allow."""
+    r_max = (2 * F * nu) // (nu + ny)
+    return [r for r in range(order + 1, 2 * order + 5) if r <= r_max]
+
+
+def fit_linear_ss(
+    bla: BLA,
+    nx: int | None = None,
+    *,
+    max_order: int = 8,
+    block_rows: int | None = None,
+    weighting: str = "auto",
+    refine_fit: bool = True,
+    validation: BLA | None = None,
+) -> LinearStateSpace:
+    """Stable linear state-space model of a BLA (module docstring for the method).
+
+    Args:
+        bla: the nonparametric BLA (its G, lines, N, fs and variances are used).
+        nx: model order; None scans 1 … max_order.
+        max_order: highest order scanned when nx is None.
+        block_rows: r; None scans n+1 … 2n+4 for every order.
+        weighting: "auto" (var_total if usable, else var_noise, else none), "total", "noise"
+            or "none".
+        refine_fit: refine the best subspace estimate of every order by weighted least squares
+            (kept only if stable and cheaper).
+        validation: a BLA of held-out data (e.g. another realization); when given, the order
+            and r are chosen by the weighted cost on it instead of on `bla`.
+
+    Returns:
+        The selected stable LinearStateSpace (u_mean = y_mean = 0; see `with_operating_point`).
+
+        Selection: on `bla` alone the weighted cost always falls with the order, so orders are
+        compared by V·(1 + n_θ·ln(2F)/(2F)) (the MDL penalty, Ljung 1999 §16.4) with
+        n_θ = n(nu+ny) + nu·ny; on a validation BLA by its plain weighted cost.
+
+    Raises:
+        ValueError: for an unusable BLA or invalid arguments.
+    """
+    z, G, var, used = _bla_arrays(bla, weighting)
+    F, ny, nu = G.shape
+    if validation is not None:
+        zv, Gv, varv, _ = _bla_arrays(validation, used if used != "none" else "none")
+        if validation.fs != bla.fs:
+            raise ValueError("the validation BLA has a different fs; use the same sampling rate")
+    orders = [nx] if nx is not None else list(range(1, max_order + 1))
+    if any(n < 1 for n in orders):
+        raise ValueError(f"model order must be >= 1; got {nx}")
+
+    def selection_cost(A, B, C, D, V_fit: float) -> float:
+        if validation is not None:
+            return weighted_cost(_frf(A, B, C, D, zv), Gv, varv)
+        n_theta = A.shape[0] * (nu + ny) + nu * ny
+        return V_fit * (1.0 + n_theta * math.log(2 * F) / (2 * F))
+
+    best: tuple[float, LinearStateSpace] | None = None
+    for n in orders:
+        rs = [block_rows] if block_rows is not None else _block_rows(n, F, nu, ny)
+        if not rs:
+            continue
+        cand: tuple[float, tuple, int] | None = None
+        for r in rs:
+            try:
+                A, B, C, D = frequency_domain_subspace(z, G, var, n, r)
+            except (ValueError, np.linalg.LinAlgError):
+                continue
+            As = stabilize(A)
+            if As is not A:
+                A = As
+                B, D = fit_b_d(A, C, z, G, var)
+            V = weighted_cost(_frf(A, B, C, D, z), G, var)
+            if np.isfinite(V) and (cand is None or V < cand[0]):
+                cand = (V, (A, B, C, D), r)
+        if cand is None:
+            continue
+        V, (A, B, C, D), r = cand
+        refined = False
+        if refine_fit:
+            Ar, Br, Cr, Dr = refine(A, B, C, D, z, G, var)
+            Vr = weighted_cost(_frf(Ar, Br, Cr, Dr, z), G, var)
+            stable = np.max(np.abs(np.linalg.eigvals(Ar))) <= MAX_POLE_RADIUS
+            if stable and np.isfinite(Vr) and Vr < V:
+                A, B, C, D, V, refined = Ar, Br, Cr, Dr, Vr, True
+        S = selection_cost(A, B, C, D, V)
+        cost = S if validation is not None else V
+        model = LinearStateSpace(
+            A=A, B=B, C=C, D=D, fs=bla.fs, order=n, r=r, cost=cost, refined=refined,
+            weighting=used,
+        )  # fmt: skip
+        if best is None or S < best[0]:
+            best = (S, model)
+    if best is None:
+        raise ValueError(
+            f"no state-space model could be fitted: {F} lines are too few for the orders "
+            f"{orders}; lower nx/max_order or give more excited lines"
+        )
+    model = best[1]
+    if not model.is_stable():  # cannot happen by construction; never hand out an unstable one
+        raise RuntimeError("internal error: selected linear model is unstable")
+    return model
