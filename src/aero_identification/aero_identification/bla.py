@@ -114,6 +114,17 @@ def detection_lines(excited_lines: np.ndarray, max_line: int) -> tuple[np.ndarra
     return grid[h % 2 == 1], grid[h % 2 == 0]
 
 
+def _check_input_power(U_abs: np.ndarray, lines: np.ndarray) -> None:
+    """Refuse lines without input power (Y/U would be inf or noise over noise)."""
+    weak = np.any(U_abs <= 1e-6 * U_abs.max(), axis=1) if U_abs.max() > 0 else np.ones(lines.size)
+    if np.any(weak):
+        raise ValueError(
+            f"the input has (almost) no power at excited line(s) {lines[weak.astype(bool)][:10]}"
+            " (more than 120 dB below the strongest line); check excited_lines against the "
+            "excitation plan (they are DFT bins of one period: frequency·N/fs)"
+        )
+
+
 def estimate_bla(
     data: PeriodicData,
     method: str = "auto",
@@ -175,6 +186,7 @@ def estimate_bla(
             )
         U = data.U[lines]  # (F, P, M)
         Y = data.Y[lines]
+        _check_input_power(np.abs(U).min(axis=1), lines)
         G_mp = Y / U
         G_m = G_mp.mean(axis=1)  # (F, M)
         var_noise = np.sum(np.abs(G_mp - G_m[:, None, :]) ** 2, axis=(1, 2)) / (M**2 * P * (P - 1))
@@ -194,6 +206,7 @@ def estimate_bla(
         at_exc = np.searchsorted(targets, lines)
         U_mean = res.U[at_exc]
         Y_mean = res.Y[at_exc]
+        _check_input_power(np.abs(U_mean), lines)
         G_m = Y_mean / U_mean
         var_G_m = frf_variance(
             G_m, U_mean, res.var_U[at_exc], res.var_Y[at_exc], res.cov_YU[at_exc]

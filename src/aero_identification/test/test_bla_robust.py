@@ -109,3 +109,14 @@ def test_robust_needs_two_periods_and_realizations() -> None:
         estimate_bla(data, method="robust")
     with pytest.raises(ValueError, match="method must be"):
         estimate_bla(data, method="welch")
+
+
+def test_line_without_input_power_is_refused() -> None:
+    rng = np.random.default_rng(1)
+    lines = np.array([1, 3, 5])
+    data = simulate(rng, lines, lambda x: x, 0.01)
+    wrong = PeriodicData(data.u, data.y, FS, [1, 3, 5, 7])  # 7 is not excited
+    with pytest.raises(ValueError, match=r"no power at excited line\(s\) \[7\]"):
+        estimate_bla(wrong)
+    with pytest.raises(ValueError, match=r"no power at excited line\(s\) \[7\]"):
+        estimate_bla(wrong, method="lpm")
