@@ -49,10 +49,12 @@ class BLA:
             detection lines: odd nonlinear distortions (plus noise at `noise_level`).
         even_lines, even_freq: (F_e,) non-excited even lines in the band, and their Hz.
         even_nl_level: (F_e,) same as `odd_nl_level` at the even lines: even distortions.
-        noise_lines, noise_freq: (F_n,) every line 1 … max(lines) and its Hz.
-        noise_level: (F_n,) standard deviation of the period-averaged Y due to noise,
-            √(mean_m var_p(Y[k, p, m]) / P); comparable with the three levels above (a line
-            with only noise has an expected level equal to `noise_level`).
+        noise_lines, noise_freq: (F_n,) lines where the noise level is given, and their Hz:
+            every line 1 … max_line (only the excited lines for the LPM with P == 1).
+        noise_level: (F_n,) standard deviation of the period-averaged Y due to noise (robust:
+            √(mean_m var_p(Y[k, p, m]) / P); LPM: from the local-polynomial residuals);
+            comparable with the three levels above (a line with only noise has an expected
+            level equal to `noise_level`).
         method: "robust" or "lpm".
     """
 
