@@ -265,3 +265,41 @@ def test_the_controller_refuses_a_non_finite_setpoint_that_reaches_it(tmp_path: 
         stop_process(proc)
     events = [r["event"] for r in _audit(audit)]
     assert "rejected_nonfinite" in events and "invalid" in events
+
+
+def test_a_restarted_host_in_polling_mode_is_followed_at_once(tmp_path: Path) -> None:
+    """A driver node restarts (new session, seq from 0 again) and polls from a timer."""
+    audit = tmp_path / "audit.jsonl"
+    proc, port = start_sim_controller(["--audit-file", str(audit)], tmp_path / "err.txt")
+    try:
+        first = ControllerLink(
+            ControllerLinkConfig("127.0.0.1", port, bind_host="127.0.0.1", first_seq=10_000)
+        )
+        for _ in range(20):
+            first.send_setpoint(math.radians(5.0))
+            first.poll()
+            time.sleep(0.005)
+        first.close()
+
+        second = ControllerLink(ControllerLinkConfig("127.0.0.1", port, bind_host="127.0.0.1"))
+        try:
+            received: list[Feedback] = []
+            deadline = time.monotonic() + 2.0
+            seq = second.send_setpoint(math.radians(2.0))
+            assert seq == 0
+            # No setpoints after the first: poll() alone must keep the heartbeats going.
+            while time.monotonic() < deadline and not (
+                received and received[-1].applied_seq == seq and len(received) > 80
+            ):
+                received += second.poll()
+                time.sleep(0.01)
+            last = received[-1]
+            assert last.applied_session == second.session and last.applied_seq == seq
+            assert last.status & Status.ENABLED and not last.status & Status.WATCHDOG
+            assert second.statistics().heartbeats_sent >= 5
+        finally:
+            second.close()
+    finally:
+        stop_process(proc)
+    applied = [(r["session"], r["seq"]) for r in _audit(audit) if r["event"] == "apply"]
+    assert applied[-1] == (second.session, 0)
