@@ -1,1 +1,50 @@
-"""Excitation design (odd random-phase multisines, sines, experiment plans) and the pitch command generator node."""
+"""Excitation design (odd random-phase multisines, sines, experiment plans) and the pitch
+command generator node."""
+
+from multisine_gen.crest import crest_factor, reduce_crest_factor
+from multisine_gen.multisine import (
+    ExcitationError,
+    LineGrid,
+    Multisine,
+    design_line_grid,
+    odd_random_phase_multisine,
+    random_phase_multisine,
+)
+from multisine_gen.plan import (
+    BaselineSweep,
+    ExperimentPlan,
+    MultisineLevel,
+    PlanError,
+    PlanLimits,
+    PlanSample,
+    Segment,
+    SineTest,
+    build_plan,
+    default_plan,
+    short_plan,
+)
+from multisine_gen.sine import Sine, design_sine
+
+__all__ = [
+    "BaselineSweep",
+    "ExcitationError",
+    "ExperimentPlan",
+    "LineGrid",
+    "Multisine",
+    "MultisineLevel",
+    "PlanError",
+    "PlanLimits",
+    "PlanSample",
+    "Segment",
+    "Sine",
+    "SineTest",
+    "build_plan",
+    "crest_factor",
+    "default_plan",
+    "design_line_grid",
+    "design_sine",
+    "odd_random_phase_multisine",
+    "random_phase_multisine",
+    "reduce_crest_factor",
+    "short_plan",
+]
