@@ -254,7 +254,7 @@ class ExperimentPlan:
     sines: tuple[SineTest, ...] = ()
     seed: int | None = None
     limits: PlanLimits = field(default_factory=PlanLimits)
-    segments: tuple[Segment, ...] = field(init=False)
+    segments: tuple[Segment, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fs) and self.fs > 0.0):
@@ -281,6 +281,8 @@ class ExperimentPlan:
             raise PlanError("plan: two multisine levels share a level index")
         object.__setattr__(self, "_render_cache", {})
         object.__setattr__(self, "segments", tuple(self._build_segments()))
+        if not self.segments:
+            raise PlanError("plan has nothing to command: no baseline, multisine level or sine")
         object.__setattr__(self, "_starts", [s.start_k for s in self.segments])
         self.validate()
 

@@ -172,6 +172,11 @@ def test_plan_beyond_the_actuator_limits_is_refused_naming_the_segment() -> None
     )
 
 
+def test_empty_plan_is_refused() -> None:
+    with pytest.raises(PlanError, match="nothing to command"):
+        ExperimentPlan(fs=200.0)
+
+
 def test_plan_above_nyquist_is_refused_naming_the_part() -> None:
     with pytest.raises(PlanError, match=r"multisine levels: .*at or above fs/2 = 100"):
         build_plan(N=2000, f_min_hz=0.1, f_max_hz=100.0)

@@ -153,8 +153,14 @@ class ActuatorModel:
 
     def step(self, command_rad: float) -> ActuatorSample:
         """Hold command_rad over one sample interval; return the sample at its end."""
+        command = float(command_rad)
+        if not math.isfinite(command):
+            raise ValueError(
+                f"ActuatorModel.step: command must be finite, got {command_rad!r}; "
+                f"pass commands through SafetyGovernor, which refuses them"
+            )
         history = self._history
-        history.insert(0, float(command_rad))
+        history.insert(0, command)
         history.pop()
         e11, e12, e21, e22, f1, f2 = self._step_coefficients
         vmax = self.max_rate_rad_s

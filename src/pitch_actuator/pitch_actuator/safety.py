@@ -181,7 +181,9 @@ class SafetyGovernor:
 
     Call `command(t_s, command_deg)` for every command received and `update(t_s)` from a timer
     (the watchdog and the ramp advance only when the governor is called); send the returned
-    setpoint to the actuator.
+    setpoint to the actuator. The watchdog is armed by the first accepted command: before it
+    (mode IDLE) the setpoint holds the initial position. After a watchdog trip, a new command
+    resumes tracking (rate limited, reported); after `stop()`, only `resume()` does.
     """
 
     def __init__(

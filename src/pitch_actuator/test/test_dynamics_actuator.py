@@ -116,6 +116,8 @@ def test_invalid_parameters_are_refused() -> None:
         ActuatorParams(noise_std_deg=-1.0)
     with pytest.raises(ValueError, match="fs must be > 0"):
         ActuatorModel(fs=0.0)
+    with pytest.raises(ValueError, match="command must be finite"):
+        ActuatorModel().step(math.nan)
 
 
 def test_internal_step_and_delay_fit_the_sample_grid() -> None:
