@@ -1,0 +1,224 @@
+"""PNLSS fits against simulated systems with a known truth (Duffing oscillator, linear system)."""
+
+import dataclasses
+import itertools
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from aero_identification.bla import BLA
+from aero_identification.data import PeriodicData
+from aero_identification.pnlss import PNLSSModel, fit_pnlss
+from aero_identification.subspace import LinearStateSpace, fit_linear_ss
+
+N = 1024  # samples per period
+P = 3  # periods per realization
+M = 2  # realizations
+LINES = np.arange(1, int(0.15 * N), 2)  # odd multisine up to 0.15 fs
+NOISE_REL = 0.005  # output noise std relative to the output std
+
+
+def odd_multisine(rng: np.random.Generator, rms: float) -> np.ndarray:
+    """(N,) one period of a random-phase odd multisine with flat amplitude spectrum."""
+    U = np.zeros(N // 2 + 1, complex)
+    U[LINES] = np.exp(2j * np.pi * rng.random(LINES.size))
+    u = np.fft.irfft(U, n=N)
+    return u / np.std(u) * rms
+
+
+def duffing(u: np.ndarray, k3: float) -> np.ndarray:
+    """Discrete Duffing oscillator y'' + c y' + k y + k3 y³ = u (semi-implicit Euler, h = 0.1).
+
+    This discretisation is itself a polynomial state-space model of degree 3, so a PNLSS model
+    with nx = 2 and degrees (2, 3) contains the truth.
+    """
+    h, c, k = 0.1, 0.1, 1.0
+    x1 = x2 = 0.0
+    y = np.empty(u.size)
+    for t in range(u.size):
+        y[t] = x1
+        x2 = x2 + h * (u[t] - c * x2 - k * x1 - k3 * x1**3)
+        x1 = x1 + h * x2
+    return y
+
+
+def steady_state(u_period: np.ndarray, k3: float, periods: int) -> np.ndarray:
+    """Noise-free output over `periods` periods after two settling periods."""
+    return duffing(np.tile(u_period, periods + 2), k3)[2 * N :]
+
+
+def robust_bla(data: PeriodicData) -> BLA:
+    """Robust BLA (Pintelon & Schoukens 2012, §4.3.1) written out here, independent of bla.py."""
+    U = np.fft.rfft(data.u, axis=0)[LINES]
+    Y = np.fft.rfft(data.y, axis=0)[LINES]
+    G_mp = Y / U
+    G_m = G_mp.mean(axis=1)
+    G = G_m.mean(axis=1)
+    var_noise = np.sum(np.var(G_mp, axis=1, ddof=1) / P, axis=1) / M**2
+    var_total = np.var(G_m, axis=1, ddof=1) / M
+    e = np.zeros(0)
+    return BLA(
+        fs=data.fs, N=N, lines=LINES, freq=LINES * data.fs / N, G=G, var_noise=var_noise,
+        var_total=var_total, var_nl=np.maximum(var_total - var_noise, 0), M=M, P=P, U_mean=e,
+        Y_mean=e, excited_level=e, odd_lines=e, odd_freq=e, odd_nl_level=e, even_lines=e,
+        even_freq=e, even_nl_level=e, noise_lines=e, noise_freq=e, noise_level=e,
+    )  # fmt: skip
+
+
+@dataclass
+class Case:
+    data: PeriodicData
+    lin: LinearStateSpace
+    u_val: np.ndarray
+    y_val: np.ndarray  # noisy
+    y_val_true: np.ndarray
+    k3: float
+
+
+def make_case(k3: float, seed: int) -> Case:
+    rng = np.random.default_rng(seed)
+    u = np.empty((N, P, M))
+    y = np.empty((N, P, M))
+    for m in range(M):
+        period = odd_multisine(rng, rms=0.15) + 0.3  # operating point ū = 0.3
+        u[:, :, m] = np.tile(period, P).reshape(P, N).T
+        y[:, :, m] = steady_state(period, k3, P).reshape(P, N).T
+    noise_std = NOISE_REL * np.std(y)
+    y = y + noise_std * rng.standard_normal(y.shape)
+    data = PeriodicData(u=u, y=y, fs=1.0, excited_lines=LINES)
+    lin = fit_linear_ss(robust_bla(data), nx=2).with_operating_point(u.mean(), y.mean())
+    u_val = np.tile(odd_multisine(rng, rms=0.15) + 0.3, 2)
+    y_val_true = steady_state(u_val[:N], k3, 2)
+    y_val = y_val_true + noise_std * rng.standard_normal(y_val_true.size)
+    return Case(data, lin, u_val, y_val, y_val_true, k3)
+
+
+def rel_rms(y: np.ndarray, y_hat: np.ndarray) -> float:
+    """Relative RMS error on the second period of the validation record (after the transient
+    of a simulation started at the operating point)."""
+    return float(np.sqrt(np.mean((y[N:] - y_hat[N:]) ** 2)) / np.std(y[N:]))
+
+
+@pytest.fixture(scope="module")
+def duffing_case() -> Case:
+    return make_case(k3=1.0, seed=1)
+
+
+@pytest.fixture(scope="module")
+def duffing_model(duffing_case: Case) -> PNLSSModel:
+    c = duffing_case
+    return fit_pnlss(c.data, c.lin, degrees=(2, 3), structure="full", max_iter=40,
+                     validation=(c.u_val, c.y_val))  # fmt: skip
+
+
+def test_pnlss_duffing_beats_linear_tenfold_and_reaches_noise_floor(duffing_case, duffing_model):
+    c = duffing_case
+    noise_floor = rel_rms(c.y_val, c.y_val_true)
+    e_lin = rel_rms(c.y_val, c.lin.simulate(c.u_val))
+    e_pnlss = rel_rms(c.y_val, duffing_model.simulate(c.u_val))
+    assert e_lin > 0.1  # the test is only meaningful if the system is clearly nonlinear
+    assert e_pnlss <= e_lin / 10
+    assert e_pnlss <= 2 * noise_floor
+
+
+def test_pnlss_noise_weighted_fit_reaches_noise_floor(duffing_case):
+    c = duffing_case
+    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), structure="statesonly", max_iter=30,
+                      validation=(c.u_val, c.y_val), weighting="noise")  # fmt: skip
+    noise_floor = rel_rms(c.y_val, c.y_val_true)
+    assert rel_rms(c.y_val, model.simulate(c.u_val)) <= 2 * noise_floor
+
+
+def test_pnlss_on_linear_system_is_not_worse_than_linear_model():
+    case = make_case(k3=0.0, seed=2)
+    model = fit_pnlss(case.data, case.lin, degrees=(2, 3), max_iter=15,
+                      validation=(case.u_val, case.y_val))  # fmt: skip
+    e_lin = rel_rms(case.y_val, case.lin.simulate(case.u_val))
+    e_pnlss = rel_rms(case.y_val, model.simulate(case.u_val))
+    noise_floor = rel_rms(case.y_val, case.y_val_true)
+    assert e_pnlss <= e_lin * (1 + 1e-9)
+    assert e_pnlss <= 1.2 * noise_floor
+
+
+def _validation_mse(model: PNLSSModel, u_val: np.ndarray, y_val: np.ndarray) -> float:
+    y = model.simulate(u_val)
+    return float(np.mean((y[model.n_transient :] - y_val[model.n_transient :]) ** 2))
+
+
+def _check_history(model: PNLSSModel) -> None:
+    """Accepted costs never increase; λ rises after every rejection and falls after acceptance."""
+    h = model.history_
+    accepted_costs = [r.cost for r in h if r.accepted]
+    assert all(b <= a for a, b in itertools.pairwise(accepted_costs))
+    for prev, nxt in itertools.pairwise(h[1:]):
+        if prev.accepted:
+            assert nxt.lambda_ < prev.lambda_
+        else:
+            assert nxt.lambda_ > prev.lambda_
+
+
+def test_diverging_steps_from_a_bad_start_are_rejected(duffing_case):
+    c = duffing_case
+    # Bad start: the linear model plus a large cubic state term (a softening spring).
+    start = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=0)
+    cubic = int(np.flatnonzero((start.exponents_state == [3, 0, 0]).all(axis=1))[0])
+    E = start.E.copy()
+    E[:, cubic] = -0.1 * np.sign(start.A[:, 0])
+    bad = dataclasses.replace(start, E=E)
+    model = fit_pnlss(c.data, c.lin, max_iter=30, validation=(c.u_val, c.y_val), initial_model=bad)
+    h = model.history_
+    assert h[0].cost > 10 * start.cost_  # the start really is bad
+    diverged = [r for r in h if not math.isfinite(r.cost)]
+    assert diverged and not any(r.accepted for r in diverged)
+    _check_history(model)
+    best_val = min(r.cost_val for r in h if r.accepted)
+    assert _validation_mse(model, c.u_val, c.y_val) == pytest.approx(best_val, rel=1e-9)
+    # ... and the fit recovered from the bad start to the noise floor.
+    noise_floor = rel_rms(c.y_val, c.y_val_true)
+    assert rel_rms(c.y_val, model.simulate(c.u_val)) <= 2 * noise_floor
+
+
+def test_step_that_diverges_on_validation_only_is_rejected(duffing_case):
+    c = duffing_case
+    # Validation at four times the training amplitude: polynomial models fitted on small signals
+    # blow up there although they improve the training cost.
+    u_big = 0.3 + 4 * (c.u_val - 0.3)
+    y_big = steady_state(u_big[:N], c.k3, 2)
+    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=20, validation=(u_big, y_big))
+    h = model.history_
+    current = h[0].cost
+    guarded = 0
+    for r in h[1:]:
+        if math.isfinite(r.cost) and r.cost < current and not math.isfinite(r.cost_val):
+            assert not r.accepted
+            guarded += 1
+        if r.accepted:
+            current = r.cost
+    assert guarded >= 1
+    _check_history(model)
+    y = model.simulate(u_big)
+    assert np.all(np.isfinite(y))
+    best_val = min(r.cost_val for r in h if r.accepted)
+    assert _validation_mse(model, u_big, y_big) == pytest.approx(best_val, rel=1e-9)
+    assert best_val < h[0].cost_val
+
+
+def test_pnlss_json_round_trip_gives_identical_simulation(duffing_case, duffing_model):
+    text = json.dumps(duffing_model.to_dict())
+    again = PNLSSModel.from_dict(json.loads(text))
+    u = duffing_case.u_val
+    np.testing.assert_array_equal(again.simulate(u), duffing_model.simulate(u))
+    x0 = np.array([0.3, -0.2])
+    np.testing.assert_array_equal(again.simulate(u, x0), duffing_model.simulate(u, x0))
+
+
+def test_pnlss_rejects_bad_arguments(duffing_case):
+    c = duffing_case
+    with pytest.raises(ValueError, match="structure"):
+        fit_pnlss(c.data, c.lin, structure="everything", max_iter=1)
+    with pytest.raises(ValueError, match="degrees"):
+        fit_pnlss(c.data, c.lin, degrees=(1, 3), max_iter=1)
+    with pytest.raises(ValueError, match="same length"):
+        fit_pnlss(c.data, c.lin, max_iter=1, validation=(c.u_val, c.y_val[:-1]))
