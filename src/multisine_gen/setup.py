@@ -28,7 +28,7 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            # ENTRY-POINTS multisine_gen
+            "generator = multisine_gen.generator_node:main",
         ],
     },
 )

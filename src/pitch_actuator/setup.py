@@ -28,7 +28,9 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            # ENTRY-POINTS pitch_actuator
+            "sim_actuator = pitch_actuator.sim_actuator_node:main",
+            "hw_actuator = pitch_actuator.hw_actuator_node:main",
+            "sim_controller = pitch_actuator.sim_controller:main",
         ],
     },
 )

@@ -80,7 +80,7 @@ def cyclone_config() -> str | None:
     )
 
 
-def dds_qos(profile: QosProfile, type_name: str | None = None) -> Qos:
+def dds_qos(profile: QosProfile, type_name: str | None = None, writer: bool = False) -> Qos:
     policies: list[Any] = [
         Policy.Reliability.Reliable(max_blocking_time=duration(seconds=5))
         if profile.reliability == "reliable"
@@ -91,8 +91,12 @@ def dds_qos(profile: QosProfile, type_name: str | None = None) -> Qos:
         Policy.History.KeepAll if profile.keep_all else Policy.History.KeepLast(profile.depth),
         Policy.DataRepresentation(use_cdrv0_representation=True),
     ]
-    if profile.keep_all:
-        # Bounded memory even for keep-all: a full reader cache back-pressures the writer.
+    if profile.keep_all and writer:
+        # Keep-all writers hold at most this many unacknowledged samples, then block (up to
+        # max_blocking_time): back-pressure instead of loss. Readers stay unlimited: a full
+        # keep-all reader cache makes Cyclone reject samples and the reliable protocol can stall
+        # until the writer times out. In simulation the generator's credit bounds what is in
+        # flight; on the rig consumers keep up with real time.
         policies.append(Policy.ResourceLimits(max_samples=4096))
     if type_name is not None:
         policies.append(Policy.Userdata(data=f"typehash={type_hash(type_name)};".encode()))

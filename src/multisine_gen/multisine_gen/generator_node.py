@@ -1,0 +1,185 @@
+"""Generator node: streams the experiment plan as pitch commands (DESIGN.md §4-§5).
+
+Publishes ``/pitch/command`` (sensor_msgs/JointState, joint ``pitch``, position in rad) sample by
+sample with stamps t0 + k/fs, the whole plan as JSON on ``/experiment/plan`` (latched) and a JSON
+event per segment start/end on ``/experiment/segment``. Pacing: the wall clock times
+``real_time_factor`` (1 on the rig; 0 = as fast as the graph takes). With ``flow_control`` the
+generator never runs more than ``max_lead_samples`` ahead of the last ``/wing/coefficients``
+stamp it has seen, a credit that makes a simulated run lossless and deterministic whatever the
+speed. At the end of the plan it publishes a ``plan_end`` event and keeps the plan latched
+until stopped; stopped early, it publishes ``plan_aborted`` and the actuator's watchdog holds
+and then ramps to the safe angle.
+"""
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+
+from .plan import ExperimentPlan, PlanLimits, default_plan, short_plan
+
+PARAMETERS = [
+    Parameter("plan", "short", "experiment plan: 'default', 'short' or a plan JSON file"),
+    Parameter("seed", 0, "seed of the plan's random phases and detection lines", min=0),
+    Parameter(
+        "real_time_factor",
+        1.0,
+        "experiment seconds per wall second; 0 = as fast as the graph takes",
+        min=0.0,
+        max=1000.0,
+    ),
+    Parameter("flow_control", True, "wait for /wing/coefficients (simulation); false on the rig"),
+    Parameter("max_lead_samples", 400, "most samples ahead of the last coefficients", min=1),
+    Parameter("wait_for_subscribers", 1, "command subscribers to wait for before t0", min=0),
+    Parameter("start_timeout_s", 60.0, "give up waiting for the graph after this long", min=0.1),
+    Parameter("exit_at_end", False, "exit after the plan (else keep the plan latched)"),
+    Parameter("min_deg", -10.0, "actuator lower limit the plan is checked against [deg]"),
+    Parameter("max_deg", 35.0, "actuator upper limit the plan is checked against [deg]"),
+    Parameter("max_rate_deg_s", 150.0, "actuator rate limit the plan is checked against", min=0.1),
+]
+
+DEG = 3.141592653589793 / 180.0
+
+
+def load_plan(spec: str, seed: int) -> ExperimentPlan:
+    """'default', 'short' or a JSON file written by ExperimentPlan.to_json()."""
+    if spec == "default":
+        return default_plan(seed=seed)
+    if spec == "short":
+        return short_plan(seed=seed)
+    path = Path(spec)
+    if not path.exists():
+        raise ValueError(f"parameter 'plan' = {spec!r}: not 'default', 'short' or an existing file")
+    return ExperimentPlan.from_json(path.read_text())
+
+
+class Generator:
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        p = node.params
+        self.plan = load_plan(p["plan"], p["seed"])
+        # Refuse before publishing anything if the plan would leave the actuator's limits.
+        self.plan.validate(
+            PlanLimits(
+                min_deg=p["min_deg"], max_deg=p["max_deg"], max_rate_deg_s=p["max_rate_deg_s"]
+            )
+        )
+        self.fs = self.plan.fs
+        self.command_deg = self.plan.command_deg()
+        self.total = len(self.command_deg)
+        self.starts = {s.start_k: s for s in self.plan.segments}
+        self.ends = {s.stop_k - 1: s for s in self.plan.segments}
+        self.cmd_pub = node.create_publisher(
+            "sensor_msgs/msg/JointState", "/pitch/command", "stream"
+        )
+        self.plan_pub = node.create_publisher("std_msgs/msg/String", "/experiment/plan", "latched")
+        self.seg_pub = node.create_publisher("std_msgs/msg/String", "/experiment/segment", "events")
+        self.k = 0
+        self.k_seen = -1
+        self.t0_ns: int | None = None
+        self.wall0 = 0.0
+        self.finished = False
+        self.created = time.monotonic()
+        if p["flow_control"]:
+            node.create_subscription(
+                "geometry_msgs/msg/Vector3Stamped",
+                "/wing/coefficients",
+                self.on_coefficients,
+                "stream",
+            )
+        node.create_timer(0.002, self.tick)
+        node.logger.info(
+            "plan %s: %d samples (%.1f s at %g Hz), %d segments",
+            p["plan"],
+            self.total,
+            self.plan.duration_s,
+            self.fs,
+            len(self.plan.segments),
+        )
+
+    def on_coefficients(self, msg: Any) -> None:
+        if self.t0_ns is None:
+            return
+        k = round((stamp_to_ns(msg.header.stamp) - self.t0_ns) * self.fs / 1e9)
+        self.k_seen = max(self.k_seen, k)
+
+    def stamp_ns(self, k: int) -> int:
+        assert self.t0_ns is not None
+        return self.t0_ns + round(k * 1e9 / self.fs)
+
+    def _event(self, payload: dict[str, Any]) -> None:
+        self.seg_pub.publish(self.node.new_message("std_msgs/msg/String", data=json.dumps(payload)))
+
+    def _start(self) -> bool:
+        p = self.node.params
+        if self.cmd_pub.subscription_count() < p["wait_for_subscribers"]:
+            if time.monotonic() - self.created > p["start_timeout_s"]:
+                self.node.logger.error(
+                    "no subscriber on /pitch/command after %.0f s: is the actuator node running?",
+                    p["start_timeout_s"],
+                )
+                self.node.request_shutdown(1)
+            return False
+        self.t0_ns = time.time_ns()
+        self.wall0 = time.monotonic()
+        payload = json.loads(self.plan.to_json())
+        payload["t0_ns"] = self.t0_ns
+        self.plan_pub.publish(
+            self.node.new_message("std_msgs/msg/String", data=json.dumps(payload))
+        )
+        self.node.logger.info("t0 = %d ns; streaming", self.t0_ns)
+        return True
+
+    def tick(self) -> None:
+        if self.finished:
+            return
+        if self.t0_ns is None and not self._start():
+            return
+        p = self.node.params
+        target = self.total
+        if p["real_time_factor"] > 0:
+            elapsed = time.monotonic() - self.wall0
+            target = min(target, int(elapsed * p["real_time_factor"] * self.fs) + 1)
+        if p["flow_control"]:
+            target = min(target, self.k_seen + 1 + p["max_lead_samples"])
+        t0_s = self.t0_ns / 1e9  # type: ignore[operator]
+        while self.k < target:
+            k = self.k
+            segment = self.starts.get(k)
+            if segment is not None:
+                self._event(segment.event("start", t0_s, self.fs) | {"t0_ns": self.t0_ns})
+            msg = self.node.new_message(
+                "sensor_msgs/msg/JointState", name=["pitch"], position=[self.command_deg[k] * DEG]
+            )
+            set_stamp(msg.header.stamp, self.stamp_ns(k))
+            self.cmd_pub.publish(msg)
+            segment = self.ends.get(k)
+            if segment is not None:
+                self._event(segment.event("end", t0_s, self.fs) | {"t0_ns": self.t0_ns})
+            self.k += 1
+        if self.k >= self.total:
+            self.finished = True
+            self._event({"event": "plan_end", "samples": self.total, "t0_ns": self.t0_ns})
+            self.node.logger.info("plan finished: %d samples published", self.total)
+            if p["exit_at_end"]:
+                self.node.request_shutdown(0)
+
+    def close(self) -> None:
+        if self.t0_ns is not None and not self.finished:
+            self._event({"event": "plan_aborted", "samples": self.k, "t0_ns": self.t0_ns})
+            self.node.logger.warning(
+                "stopped at sample %d of %d; the actuator holds, then ramps to its safe angle",
+                self.k,
+                self.total,
+            )
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(Generator, "generator", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,98 @@
+"""What the simulated and the hardware actuator nodes share: limits, safety, diagnostics.
+
+Both nodes put every command through the same :class:`~pitch_actuator.safety.SafetyGovernor`
+(limits, rate limit, NaN refusal, watchdog hold-then-ramp, stop requests) and report it the
+same way on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray).
+"""
+
+import math
+import time
+from typing import Any
+
+from rig_runtime import Node, Parameter
+
+from .safety import ActuatorLimits, GovernorEvent, SafetyGovernor
+
+LIMIT_PARAMETERS = [
+    Parameter("min_deg", -10.0, "lowest pitch setpoint ever sent [deg]", min=-90.0, max=90.0),
+    Parameter("max_deg", 35.0, "highest pitch setpoint ever sent [deg]", min=-90.0, max=90.0),
+    Parameter("max_rate_deg_s", 150.0, "setpoint rate limit [deg/s]", min=0.1, max=2000.0),
+    Parameter("safe_angle_deg", 0.0, "where the wing goes after a stop or lost commands [deg]"),
+    Parameter("watchdog_timeout_s", 0.25, "no command this long trips the watchdog [s]", min=0.005),
+    Parameter("hold_s", 1.0, "hold still this long after a trip or stop [s]", min=0.0),
+    Parameter("ramp_rate_deg_s", 5.0, "rate of the ramp to the safe angle [deg/s]", min=0.01),
+    Parameter("initial_deg", 0.0, "pitch at start-up [deg]"),
+    Parameter("diagnostics_period_s", 1.0, "period of /diagnostics status [s]", min=0.05),
+]
+
+
+def limits_from_params(params: Any) -> ActuatorLimits:
+    return ActuatorLimits(
+        min_deg=params["min_deg"],
+        max_deg=params["max_deg"],
+        max_rate_deg_s=params["max_rate_deg_s"],
+        safe_angle_deg=params["safe_angle_deg"],
+        watchdog_timeout_s=params["watchdog_timeout_s"],
+        hold_s=params["hold_s"],
+        ramp_rate_deg_s=params["ramp_rate_deg_s"],
+    )
+
+
+def command_position(msg: Any) -> float:
+    """The ``pitch`` joint's position of a JointState command (NaN if absent)."""
+    names = list(msg.name)
+    positions = msg.position
+    if "pitch" in names:
+        index = names.index("pitch")
+    elif not names and len(positions) == 1:
+        index = 0
+    else:
+        return math.nan
+    return float(positions[index]) if index < len(positions) else math.nan
+
+
+class SafetyReporter:
+    """Logs governor events and publishes /diagnostics (periodically and on events)."""
+
+    def __init__(self, node: Node, governor: SafetyGovernor, hardware_id: str) -> None:
+        self.node = node
+        self.governor = governor
+        self.hardware_id = hardware_id
+        self.pub = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics")
+        self.extra: dict[str, str] = {}
+        self._last_publish = 0.0
+        self._pending = False
+        node.create_timer(node.params["diagnostics_period_s"], self.publish)
+        node.create_timer(0.1, self._flush_events)
+
+    def _flush_events(self) -> None:
+        events: list[GovernorEvent] = self.governor.drain_events()
+        for event in events:
+            log = self.node.logger.error if event.level >= 2 else self.node.logger.warning
+            if event.level == 0:
+                log = self.node.logger.info
+            log("%s", event.message)
+        if events:
+            self.publish()
+
+    def publish(self) -> None:
+        status = self.governor.status()
+        values = dict(status.values)
+        values.update(self.extra)
+        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
+        stamp = time.time_ns()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        msg.status = [
+            self.node.new_message(
+                "diagnostic_msgs/msg/DiagnosticStatus",
+                level=int(status.level),
+                name=f"{self.node.name}: pitch actuator safety",
+                message=status.message,
+                hardware_id=self.hardware_id,
+                values=[
+                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=str(v))
+                    for k, v in values.items()
+                ],
+            )
+        ]
+        self.pub.publish(msg)

@@ -1,0 +1,155 @@
+"""Hardware actuator node: pitch commands to the real-time position controller over UDP.
+
+Every ``/pitch/command`` goes through the shared safety layer (limits, rate limit, NaN refusal,
+watchdog hold-then-ramp, ``/pitch/stop``) and is sent as a setpoint over the PWAC UDP protocol
+(docs/protocols.md) with a sequence number; the controller applies only setpoints newer than
+the last it applied. Feedback arrives at the controller's rate and is published on
+``/pitch/state`` with the controller's acquisition stamps (``stamp_source: controller``, for a
+PTP-synchronised controller clock) or the host receive time (``stamp_source: host``). Link
+health (loss, duplicates, reordering, feedback age) goes to ``/diagnostics``.
+"""
+
+import math
+import sys
+import time
+from typing import Any
+
+from rig_runtime import Node, Parameter, run_node, set_stamp
+
+from .actuator_common import LIMIT_PARAMETERS, SafetyReporter, command_position, limits_from_params
+from .controller_link import ControllerLink, ControllerLinkConfig
+from .controller_protocol import Feedback, Status
+from .safety import SafetyGovernor
+
+PARAMETERS = [
+    *LIMIT_PARAMETERS,
+    Parameter("controller_host", "127.0.0.1", "IP address of the position controller"),
+    Parameter("controller_port", 5700, "UDP port of the position controller", min=1, max=65535),
+    Parameter("bind_host", "0.0.0.0", "local interface for feedback"),
+    Parameter("bind_port", 0, "local UDP port for feedback (0 = any)", min=0, max=65535),
+    Parameter(
+        "heartbeat_period_s",
+        0.05,
+        "heartbeat period when no setpoint flows [s]",
+        min=0.001,
+        max=1.0,
+    ),
+    Parameter(
+        "update_rate_hz", 200.0, "safety/watchdog update and feedback poll rate [Hz]", min=10.0
+    ),
+    Parameter(
+        "stamp_source", "controller", "stamp of /pitch/state", choices=("controller", "host")
+    ),
+    Parameter(
+        "state_qos", "sensor", "QoS of /pitch/state", choices=("stream", "sensor", "default")
+    ),
+]
+
+
+class HwActuator:
+    def __init__(self, node: Node) -> None:
+        p = node.params
+        self.node = node
+        self.limits = limits_from_params(p)
+        self.link = ControllerLink(
+            ControllerLinkConfig(
+                controller_host=p["controller_host"],
+                controller_port=p["controller_port"],
+                bind_host=p["bind_host"],
+                bind_port=p["bind_port"],
+                heartbeat_period_s=p["heartbeat_period_s"],
+            )
+        )
+        self.t_origin = time.monotonic()
+        self.governor = SafetyGovernor(self.limits, initial_deg=p["initial_deg"], t_s=0.0)
+        self.sent_setpoint_deg: float | None = None
+        self.state_pub = node.create_publisher(
+            "sensor_msgs/msg/JointState", "/pitch/state", p["state_qos"]
+        )
+        self.reporter = SafetyReporter(
+            node, self.governor, f"pwac://{p['controller_host']}:{p['controller_port']}"
+        )
+        node.create_subscription(
+            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream"
+        )
+        node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
+        node.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
+        node.create_timer(p["diagnostics_period_s"], self.update_link_diagnostics)
+        self.published = 0
+        node.logger.info(
+            "controller link %s -> %s", self.link.local_address, self.link.controller_address
+        )
+
+    def _now(self) -> float:
+        return time.monotonic() - self.t_origin
+
+    def _send(self, setpoint_deg: float) -> None:
+        # Resend only what changed; the heartbeat keeps the controller's watchdog fed.
+        if setpoint_deg != self.sent_setpoint_deg:
+            self.link.send_setpoint(math.radians(setpoint_deg))
+            self.sent_setpoint_deg = setpoint_deg
+
+    def on_command(self, msg: Any) -> None:
+        setpoint_deg = self.governor.command(self._now(), math.degrees(command_position(msg)))
+        self._send(setpoint_deg)
+
+    def on_stop(self, msg: Any) -> None:
+        if msg.data:
+            self._send(self.governor.stop(self._now(), "stop requested on /pitch/stop"))
+        else:
+            self.governor.resume(self._now())
+
+    def on_timer(self) -> None:
+        # Watchdog and ramp advance with time even when commands stop.
+        self._send(self.governor.update(self._now()))
+        for feedback in self.link.poll():
+            self.publish_state(feedback)
+
+    def publish_state(self, feedback: Feedback) -> None:
+        msg = self.node.new_message(
+            "sensor_msgs/msg/JointState",
+            name=["pitch"],
+            position=[feedback.position_rad],
+            velocity=[feedback.velocity_rad_s],
+        )
+        stamp = (
+            feedback.stamp_ns
+            if self.node.params["stamp_source"] == "controller"
+            else time.time_ns()
+        )
+        set_stamp(msg.header.stamp, stamp)
+        self.state_pub.publish(msg)
+        self.published += 1
+        if feedback.status & Status.LIMIT:
+            self.reporter.extra["controller_limit"] = "target clamped by controller hard limits"
+
+    def update_link_diagnostics(self) -> None:
+        stats = self.link.statistics()
+        fb = stats.feedback
+        self.reporter.extra.update(
+            {
+                "feedback_received": str(fb.received),
+                "feedback_lost": str(fb.lost),
+                "feedback_duplicated": str(fb.duplicated),
+                "feedback_reordered": str(fb.reordered),
+                "controller_rx_lost": str(stats.controller_rx_lost),
+                "setpoints_sent": str(stats.setpoints_sent),
+                "last_feedback_age_s": f"{stats.last_feedback_age_s:.3f}"
+                if stats.last_feedback_age_s is not None
+                else "never",
+                "states_published": str(self.published),
+            }
+        )
+        if stats.last_feedback_age_s is None or stats.last_feedback_age_s > 0.5:
+            self.node.logger.warning("no feedback from the controller for > 0.5 s")
+
+    def close(self) -> None:
+        self.link.close(hold=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(HwActuator, "hw_actuator", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,129 @@
+"""Simulated actuator node (DESIGN.md §5-§6): the position loop of dynamics.py behind the
+shared safety layer.
+
+Reactive: every ``/pitch/command`` sample k yields one ``/pitch/state`` sample k with the same
+stamp, so a simulated run is deterministic for a seed whatever the speed. The state carries the
+joint ``pitch`` (logged position: noise, quantisation; velocity) and, as simulation ground
+truth, the joint ``alpha_true`` (true pitch + free-stream gust), which only the simulated wing
+reads. If commands stop for ``watchdog_timeout_s`` of wall time the node keeps stepping the
+model in real time: the governor holds, then ramps to the safe angle, as the rig would.
+``/pitch/stop`` (std_msgs/Bool): true = stop (hold, then safe angle), false = resume.
+"""
+
+import math
+import sys
+import time
+from typing import Any
+
+from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+
+from .actuator_common import LIMIT_PARAMETERS, SafetyReporter, command_position, limits_from_params
+from .dynamics import ActuatorModel, ActuatorParams
+from .safety import SafetyGovernor
+
+PARAMETERS = [
+    *LIMIT_PARAMETERS,
+    Parameter("fs", 200.0, "command and state sample rate [Hz]", min=1.0, max=10000.0),
+    Parameter("seed", 0, "seed of the encoder noise and the gust", min=0),
+    Parameter("natural_frequency_hz", 15.0, "position loop natural frequency [Hz]", min=0.1),
+    Parameter("damping_ratio", 0.7, "position loop damping ratio", min=0.01, max=10.0),
+    Parameter("delay_s", 0.001, "command delay [s]", min=0.0, max=0.1),
+    Parameter("actuator_rate_limit_deg_s", 250.0, "physical rate limit [deg/s]", min=1.0),
+    Parameter("noise_std_deg", 0.01, "logged-pitch noise std [deg]", min=0.0),
+    Parameter("encoder_step_deg", 0.005, "logged-pitch quantisation [deg]", min=0.0),
+    Parameter("gust_std_deg", 0.2, "free-stream gust on alpha, std [deg]", min=0.0),
+    Parameter("gust_time_constant_s", 0.1, "gust correlation time [s]", min=1e-3),
+    Parameter(
+        "state_qos", "stream", "QoS of /pitch/state", choices=("stream", "sensor", "default")
+    ),
+]
+
+
+class SimActuator:
+    def __init__(self, node: Node) -> None:
+        p = node.params
+        self.node = node
+        self.fs = p["fs"]
+        self.limits = limits_from_params(p)
+        self.model = ActuatorModel(
+            ActuatorParams(
+                natural_frequency_hz=p["natural_frequency_hz"],
+                damping_ratio=p["damping_ratio"],
+                delay_s=p["delay_s"],
+                max_rate_deg_s=p["actuator_rate_limit_deg_s"],
+                noise_std_deg=p["noise_std_deg"],
+                encoder_step_deg=p["encoder_step_deg"],
+                gust_std_deg=p["gust_std_deg"],
+                gust_time_constant_s=p["gust_time_constant_s"],
+                initial_deg=min(max(p["initial_deg"], p["min_deg"]), p["max_deg"]),
+            ),
+            fs=self.fs,
+            seed=p["seed"],
+        )
+        self.governor = SafetyGovernor(self.limits, initial_deg=p["initial_deg"], t_s=0.0)
+        self.state_pub = node.create_publisher(
+            "sensor_msgs/msg/JointState", "/pitch/state", p["state_qos"]
+        )
+        self.reporter = SafetyReporter(node, self.governor, "sim_actuator")
+        node.create_subscription(
+            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream"
+        )
+        node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
+        self.t_origin_ns: int | None = None
+        self.last_stamp_ns: int | None = None
+        self.last_command_wall = 0.0
+        self.self_steps = 0
+        node.create_timer(1.0 / self.fs, self.on_timer)
+
+    def _time_s(self, stamp_ns: int) -> float:
+        if self.t_origin_ns is None:
+            self.t_origin_ns = stamp_ns
+        return (stamp_ns - self.t_origin_ns) / 1e9
+
+    def _step_and_publish(self, setpoint_rad: float, stamp_ns: int) -> None:
+        sample = self.model.step(setpoint_rad)
+        msg = self.node.new_message(
+            "sensor_msgs/msg/JointState",
+            name=["pitch", "alpha_true"],
+            position=[sample.position_rad, sample.alpha_true_rad],
+            velocity=[sample.velocity_rad_s, sample.velocity_rad_s],
+        )
+        set_stamp(msg.header.stamp, stamp_ns)
+        self.state_pub.publish(msg)
+        self.last_stamp_ns = stamp_ns
+
+    def on_command(self, msg: Any) -> None:
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        setpoint = self.governor.command_rad(self._time_s(stamp_ns), command_position(msg))
+        self._step_and_publish(setpoint, stamp_ns)
+        self.last_command_wall = time.monotonic()
+        self.self_steps = 0
+
+    def on_stop(self, msg: Any) -> None:
+        t = self._time_s(self.last_stamp_ns or time.time_ns())
+        if msg.data:
+            self.governor.stop(t, "stop requested on /pitch/stop")
+        else:
+            self.governor.resume(t)
+
+    def on_timer(self) -> None:
+        # Without commands the actuator lives on in real time: hold, then ramp to safe.
+        if self.last_stamp_ns is None:
+            return
+        silent = time.monotonic() - self.last_command_wall
+        if silent < self.limits.watchdog_timeout_s and not self.governor.stopped:
+            return
+        due = int(silent * self.fs) - self.self_steps if not self.governor.stopped else 1
+        for _ in range(max(0, min(due, 50))):
+            stamp_ns = self.last_stamp_ns + round(1e9 / self.fs)
+            setpoint_deg = self.governor.update(self._time_s(stamp_ns))
+            self._step_and_publish(math.radians(setpoint_deg), stamp_ns)
+            self.self_steps += 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(SimActuator, "sim_actuator", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,37 @@
+"""Shared pieces of the graph tests: an in-process observer node that collects topics."""
+
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+from rig_runtime.messages import stamp_to_ns
+from rig_runtime.node import Node
+
+
+class Observer:
+    """Subscribes (in the test process, DDS backend) and keeps (stamp_ns, values) per topic."""
+
+    def __init__(self, topics: dict[str, tuple[str, str]]) -> None:
+        self.node = Node("test_observer", argv=[], backend="dds")
+        self.data: dict[str, list[tuple[int, Any]]] = defaultdict(list)
+        self.subs = []
+        for topic, (type_name, qos) in topics.items():
+            self.subs.append(
+                self.node.create_subscription(
+                    type_name, topic, lambda m, t=topic: self._store(t, m), qos=qos
+                )
+            )
+
+    def _store(self, topic: str, msg: Any) -> None:
+        header = getattr(msg, "header", None)
+        stamp = stamp_to_ns(header.stamp) if header is not None else 0
+        self.data[topic].append((stamp, msg))
+
+    def spin_until(self, predicate: Any, timeout_s: float) -> bool:
+        return self.node.spin_until(predicate, timeout_s)
+
+    def stamps(self, topic: str) -> np.ndarray:
+        return np.array([s for s, _ in self.data[topic]], dtype=np.int64)
+
+    def close(self) -> None:
+        self.node.close()
