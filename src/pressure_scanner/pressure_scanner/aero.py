@@ -162,14 +162,16 @@ def advance_aero(
     a_inst = 1.0 - c[C_A1] - c[C_A2]
     for k in range(alpha.shape[0]):
         a_now = alpha[k]
-        if state[S_STARTED] == 0.0:
+        n_sub = m
+        if state[S_STARTED] == 0.0:  # first sample: steady flow, nothing to integrate
             _initialise(a_now, state, c)
+            n_sub = 0
         a_prev = state[S_ALPHA_PREV]
         alpha_dot = (a_now - a_prev) * c[C_FS]
         downwash = alpha_dot * c[C_DOWNWASH]
         cl_nc = math.pi * c[C_TU] * alpha_dot
-        alpha_e = 0.0
-        for j in range(m):
+        alpha_e = a_inst * a_now + state[S_X1] + state[S_X2]
+        for j in range(n_sub):
             a_mid = a_prev + (a_now - a_prev) * (j + 0.5) / m
             a_end = a_prev + (a_now - a_prev) * (j + 1.0) / m
             a34_mid = a_mid + downwash
