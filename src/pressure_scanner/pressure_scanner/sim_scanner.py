@@ -153,17 +153,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             pass  # a scanner streams on whether or not anyone listens
 
     period_ns = 1e9 / args.rate
-    t0_ns = time.time_ns() + 20_000_000  # first acquisition slightly ahead: room to pace
-    t0_mono = time.monotonic() + 0.02
+    t0_ns = 0
+    t0_mono = 0.0
     swapped: bytes | None = None
     sent = 0
     k = 0
     try:
         while running and (args.frames == 0 or k < args.frames):
-            delay = t0_mono + k / args.rate - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
             counter = (args.start_counter + k) % (1 << 32)
+            # Compute frame k before its send time, so a slow first plant step (imports,
+            # caches) delays the start of the stream instead of putting it behind schedule.
             if k < args.wind_off_frames:
                 channels_pa = offsets + noise.normal(0.0, args.wind_off_noise_pa, args.channels)
             else:
@@ -173,7 +172,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 )
                 taps_pa = np.asarray(plant.step(alpha), dtype=np.float64)
                 channels_pa = cmap.channels_from_taps(taps_pa, args.channels) + offsets
-            stamp = t0_ns + round(k * period_ns)
+            if k == 0:
+                t0_ns, t0_mono = time.time_ns(), time.monotonic()
+            delay = t0_mono + k / args.rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            stamp = t0_ns + round(k * period_ns)  # the acquisition instant on the schedule
             datagram = pack_frame(
                 ScannerFrame(
                     frame_counter=counter,
