@@ -152,8 +152,12 @@ def contour_weights(x_c: np.ndarray, z_c: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _integrate_contour(
-    cp: np.ndarray,
+    values: np.ndarray,
     alpha: np.ndarray,
+    q: np.ndarray,
+    use_range: bool,
+    range_low: float,
+    range_high: float,
     order: np.ndarray,
     x: np.ndarray,
     z: np.ndarray,
@@ -165,17 +169,41 @@ def _integrate_contour(
     te_min_x: float,
     out: np.ndarray,
     reason: np.ndarray,
+    excluded: np.ndarray,
+    out_of_range: np.ndarray,
+    n_excluded: np.ndarray,
 ) -> None:
-    """cp (K, n) with NaN = excluded; order (n,) tap indices along the contour (lower TE → LE →
-    upper TE); writes out (K, 5) = cn, ca, cm, cl, cd and reason (K,)."""
+    """values (K, n): pressures [Pa] divided by q (K,) into Cp, or Cp with q = 1; order (n,)
+    tap indices along the contour (lower TE → LE → upper TE). Writes out (K, 5) = cn, ca, cm,
+    cl, cd, reason (K,) `Coverage` codes, excluded / out_of_range (K, n), n_excluded (K,)."""
     n = order.shape[0]
+    cp = np.empty(n)
     px = np.empty(n + 2)
     pz = np.empty(n + 2)
     pc = np.empty(n + 2)
-    for k in range(cp.shape[0]):
+    for k in range(values.shape[0]):
         for j in range(5):
             out[k, j] = np.nan
-        if reason[k] != 0:
+        q_ok = np.isfinite(q[k]) and q[k] > 0.0
+        count = 0
+        for i in range(n):
+            v = values[k, i]
+            bad = not np.isfinite(v)
+            if not bad and use_range and (v < range_low or v > range_high):
+                out_of_range[k, i] = True
+                bad = True
+            if not q_ok:
+                bad = True
+            excluded[k, i] = bad
+            cp[i] = np.nan if bad else v / q[k]
+            if bad:
+                count += 1
+        n_excluded[k] = count
+        if not q_ok:
+            reason[k] = 7
+            continue
+        if not np.isfinite(alpha[k]):
+            reason[k] = 6
             continue
         # Gather valid points, checking gaps in φ and trailing-edge cover on the way.
         m = 1
@@ -186,7 +214,7 @@ def _integrate_contour(
         last_upper = -1
         for j in range(n):
             i = order[j]
-            if not np.isfinite(cp[k, i]):
+            if excluded[k, i]:
                 continue
             if m > 1 and gap_code == 0:
                 limit = le_max_gap if min(last_x, x[i]) < le_region_x else max_gap
@@ -200,12 +228,12 @@ def _integrate_contour(
             last_phi = phi[i]
             last_x = x[i]
             if side[i] < 0 and last_lower < 0:
-                last_lower = i  # contour runs from the lower trailing edge forward
+                last_lower = i  # the contour runs from the lower trailing edge forward
             if side[i] > 0:
                 last_upper = i
             px[m] = x[i]
             pz[m] = z[i]
-            pc[m] = cp[k, i]
+            pc[m] = cp[i]
             m += 1
         if last_upper < 0 or x[last_upper] < te_min_x:
             reason[k] = 4
@@ -216,7 +244,9 @@ def _integrate_contour(
         if gap_code != 0:
             reason[k] = gap_code
             continue
-        cp_te = 0.5 * (cp[k, last_lower] + cp[k, last_upper])
+        reason[k] = 0
+        # Trailing edge closed with the mean of the last valid upper and lower taps.
+        cp_te = 0.5 * (cp[last_lower] + cp[last_upper])
         px[0] = 1.0
         pz[0] = 0.0
         pc[0] = cp_te
@@ -232,15 +262,15 @@ def _integrate_contour(
             c_mean = 0.5 * (pc[j] + pc[j + 1])
             cn -= c_mean * dx
             ca += c_mean * dz
-            cm += 0.5 * (pc[j] * (px[j] - 0.25) + pc[j + 1] * (px[j + 1] - 0.25)) * dx
+            cm += 0.5 * (pc[j] * (px[j] - _X_REF) + pc[j + 1] * (px[j + 1] - _X_REF)) * dx
             cm += 0.5 * (pc[j] * pz[j] + pc[j + 1] * pz[j + 1]) * dz
-        ca_cos = np.cos(alpha[k])
-        sa = np.sin(alpha[k])
+        cos_a = np.cos(alpha[k])
+        sin_a = np.sin(alpha[k])
         out[k, 0] = cn
         out[k, 1] = ca
         out[k, 2] = cm
-        out[k, 3] = cn * ca_cos - ca * sa
-        out[k, 4] = cn * sa + ca * ca_cos
+        out[k, 3] = cn * cos_a - ca * sin_a
+        out[k, 4] = cn * sin_a + ca * cos_a
 
 
 class PressureIntegrator:
@@ -281,24 +311,19 @@ class PressureIntegrator:
 
         pressure_pa: (n_taps,) or (K, n_taps) gauge pressures against free-stream static [Pa].
         alpha_rad: scalar or (K,) angle of attack used to rotate (C_n, C_a) into (C_l, C_d).
-        dynamic_pressure_pa: scalar or (K,) q = ½ρU².
+        dynamic_pressure_pa: scalar or (K,) q = ½ρU²; a sample with q not positive and finite
+            is invalid (Coverage.INVALID_DYNAMIC_PRESSURE), all its taps excluded.
         """
         p = self._as_samples(pressure_pa, "pressure_pa")
-        low, high = self.scanner_range_pa
-        with np.errstate(invalid="ignore"):
-            out_of_range = np.isfinite(p) & ((p < low) | (p > high))
-        q = np.broadcast_to(np.asarray(dynamic_pressure_pa, dtype=float), (p.shape[0],))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cp = p / q[:, None]
-        cp[out_of_range] = np.nan
-        bad_q = ~(np.isfinite(q) & (q > 0.0))
-        return self._integrate(cp, alpha_rad, out_of_range, bad_q)
+        k = p.shape[0]
+        q = self._per_sample(dynamic_pressure_pa, k, "dynamic_pressure_pa")
+        return self._run(p, self._per_sample(alpha_rad, k, "alpha_rad"), q, True)
 
     def integrate_cp(self, cp: np.ndarray, alpha_rad: np.ndarray | float) -> Coefficients:
         """Coefficients from pressure coefficients cp (n_taps,) or (K, n_taps); no range check."""
-        c = self._as_samples(cp, "cp").copy()
-        none = np.zeros(c.shape, dtype=bool)
-        return self._integrate(c, alpha_rad, none, np.zeros(c.shape[0], dtype=bool))
+        c = self._as_samples(cp, "cp")
+        k = c.shape[0]
+        return self._run(c, self._per_sample(alpha_rad, k, "alpha_rad"), np.ones(k), False)
 
     def _as_samples(self, values: np.ndarray, label: str) -> np.ndarray:
         arr = np.asarray(values, dtype=np.float64)
@@ -309,30 +334,34 @@ class PressureIntegrator:
                 f"{label} must have shape ({self.taps.n_taps},) or (K, {self.taps.n_taps}) "
                 f"for this tap layout, got {np.shape(values)}"
             )
-        return arr
+        return np.ascontiguousarray(arr)
 
-    def _integrate(
-        self,
-        cp: np.ndarray,
-        alpha_rad: np.ndarray | float,
-        out_of_range: np.ndarray,
-        bad_q: np.ndarray,
+    @staticmethod
+    def _per_sample(value: np.ndarray | float, k: int, label: str) -> np.ndarray:
+        arr = np.asarray(value, dtype=np.float64)
+        if arr.ndim == 0:
+            return np.full(k, float(arr))
+        if arr.shape != (k,):
+            raise ValueError(f"{label} must be a scalar or shape ({k},), got {arr.shape}")
+        return np.ascontiguousarray(arr)
+
+    def _run(
+        self, values: np.ndarray, alpha: np.ndarray, q: np.ndarray, use_range: bool
     ) -> Coefficients:
-        k = cp.shape[0]
-        alpha = np.asarray(alpha_rad, dtype=np.float64)
-        if alpha.ndim > 1 or (alpha.ndim == 1 and alpha.shape[0] != k):
-            raise ValueError(f"alpha_rad must be a scalar or shape ({k},), got {alpha.shape}")
-        alpha = np.ascontiguousarray(np.broadcast_to(alpha, (k,)))
-        excluded = ~np.isfinite(cp)
-        cp[excluded] = np.nan
-        reason = np.zeros(k, dtype=np.int8)
-        reason[bad_q] = Coverage.INVALID_DYNAMIC_PRESSURE
-        reason[~np.isfinite(alpha)] = Coverage.INVALID_ALPHA
+        k, n = values.shape
         out = np.empty((k, 5))
+        reason = np.empty(k, dtype=np.int8)
+        excluded = np.zeros((k, n), dtype=np.bool_)
+        out_of_range = np.zeros((k, n), dtype=np.bool_)
+        n_excluded = np.empty(k, dtype=np.int64)
         c = self.criterion
         _integrate_contour(
-            np.ascontiguousarray(cp),
+            values,
             alpha,
+            q,
+            use_range,
+            self.scanner_range_pa[0],
+            self.scanner_range_pa[1],
             self._order,
             self._x,
             self._z,
@@ -344,19 +373,20 @@ class PressureIntegrator:
             c.trailing_edge_min_x_c,
             out,
             reason,
+            excluded,
+            out_of_range,
+            n_excluded,
         )
-        if np.any(bad_q):  # every tap is unusable when q is
-            excluded = excluded | bad_q[:, None]
         return Coefficients(
             cl=out[:, 3],
             cd=out[:, 4],
             cm=out[:, 2],
             cn=out[:, 0],
             ca=out[:, 1],
-            valid=reason == Coverage.OK,
+            valid=reason == 0,
             excluded=excluded,
             out_of_range=out_of_range,
-            n_excluded=excluded.sum(axis=1),
+            n_excluded=n_excluded,
             reason=reason,
             tap_names=self.taps.names,
         )
