@@ -290,6 +290,14 @@ def jacobian_records(A, B, C, D, E, F, exp_state, exp_output, u, y_meas, n_skip,
     R = u.shape[0]
     N = y_meas.shape[1]
     ny = C.shape[0]
+    nx = A.shape[0]
+    n_par = nx * (nx + B.shape[1] + E.shape[1]) + ny * (nx + D.shape[1] + F.shape[1])
+    n_par += ny if fit_offset else 0
+    # numba does not check bounds: refuse a buffer that is too small instead of corrupting memory
+    if J.shape[0] != R * N * ny or J.shape[1] != n_par + 1:
+        raise ValueError("J must have shape (R*N*ny, n_par + 1); see the docstring")
+    if y_meas.shape[0] != R or u.shape[1] != n_skip + N:
+        raise ValueError("u must be (R, n_skip + N, nu) and y_meas (R, N, ny)")
     ok = np.empty(R, dtype=np.bool_)
     for r in prange(R):
         ok[r] = _jacobian_one(A, B, C, D, E, F, exp_state, exp_output, u[r], y_meas[r], n_skip,

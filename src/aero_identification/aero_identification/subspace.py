@@ -73,10 +73,11 @@ class LinearStateSpace:
     weighting: str = "none"
 
     def __post_init__(self) -> None:
-        self.A = np.atleast_2d(np.asarray(self.A, dtype=float))
-        self.B = np.atleast_2d(np.asarray(self.B, dtype=float))
-        self.C = np.atleast_2d(np.asarray(self.C, dtype=float))
-        self.D = np.atleast_2d(np.asarray(self.D, dtype=float))
+        # C-contiguous float64: the compiled simulation kernel is specialised on the layout.
+        self.A = np.ascontiguousarray(np.atleast_2d(np.asarray(self.A, dtype=float)))
+        self.B = np.ascontiguousarray(np.atleast_2d(np.asarray(self.B, dtype=float)))
+        self.C = np.ascontiguousarray(np.atleast_2d(np.asarray(self.C, dtype=float)))
+        self.D = np.ascontiguousarray(np.atleast_2d(np.asarray(self.D, dtype=float)))
         nx, nu, ny = self.A.shape[0], self.B.shape[1], self.C.shape[0]
         if self.A.shape != (nx, nx) or self.B.shape[0] != nx or self.C.shape[1] != nx:
             raise ValueError(

@@ -222,3 +222,14 @@ def test_pnlss_rejects_bad_arguments(duffing_case):
         fit_pnlss(c.data, c.lin, degrees=(1, 3), max_iter=1)
     with pytest.raises(ValueError, match="same length"):
         fit_pnlss(c.data, c.lin, max_iter=1, validation=(c.u_val, c.y_val[:-1]))
+
+
+def test_qr_and_normal_equation_solvers_give_the_same_fit(duffing_case):
+    c = duffing_case
+    fits = [
+        fit_pnlss(c.data, c.lin, max_iter=12, validation=(c.u_val, c.y_val), solver=solver)
+        for solver in ("qr", "normal")
+    ]
+    assert [r.accepted for r in fits[0].history_] == [r.accepted for r in fits[1].history_]
+    np.testing.assert_allclose(fits[0].simulate(c.u_val), fits[1].simulate(c.u_val), rtol=1e-6,
+                               atol=1e-9 * np.std(c.y_val))  # fmt: skip
