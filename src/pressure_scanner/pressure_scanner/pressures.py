@@ -9,19 +9,26 @@ and flips the signs of α, C_n and C_m):
      blended distribution (step 2) gives exactly the aero model's circulatory lift C_l,circ at
      the true α. It is the "reduced circulation" of Kirchhoff flow plus the viscous de-cambering
      that brings the inviscid panel slope (7.26/rad) down to C_lα = 0.104/° (5.96/rad).
-  2. Kirchhoff blend on the suction side: ahead of the separation point x_s = f the flow is
-     attached; aft of it the pressure relaxes to the base (free-streamline) pressure
-     Cp_b = Cp_inv(x_s), reached at x_s + w (smoothstep, w = blend width) and held to the
-     trailing edge. At f = 1 the distribution is the attached one.
+  2. Kirchhoff blend on the suction side: aft of the separation point x_s = f the pressure is
+     the base (free-streamline) pressure Cp_b = max(Cp_inv(x_s), Cp_b,min), held to the
+     trailing edge; over [x_s − w, x_s] the attached Cp blends into it (smoothstep, w = the
+     blend width, shrunk near the edges so that the leading-edge point stays attached and
+     f = 1 is the attached distribution). The floor Cp_b,min (a bluff-body base pressure)
+     makes deep stall a flat suction plateau over a loaded lower surface.
   3. Leading-edge vortex: a travelling suction bump −A_v (1 − u²)², u = (x − x_v)/h_v, on the
      suction side, x_v moving aft with the vortex time; A_v gives the model's vortex lift.
   4. Added mass: ∓(A_nc/2)(8/π)√(x(1−x)) on the upper/lower surface (the thin-aerofoil
      non-circulatory loading shape), A_nc giving the model's π T_u α̇ lift.
 
 The fine-grid integrals of each part (C_n, C_a, C_m per unit amplitude, or tabulated over
-(α_c, x_s) for part 1–2 on a 2 × 401-point cosine grid) are computed once; the per-sample
-"fine-grid truth" is read from these tables (bilinear), which is what makes the 49-tap
-integration error measurable at 100k samples/s.
+(α_c, x_s) for parts 1–2 on a 2 × 401-point cosine grid) are computed once; the per-sample
+"fine-grid truth" is read from these tables (bilinear; within 4e-4 of integrating the
+synthesised Cp directly on the fine grid), which is what makes the 49-tap integration error
+measurable at 100k samples/s. A lift target outside the table (α_c ∈ [−5°, 28°]) is clamped,
+and then the truth's fine-grid C_l differs from the model's C_l — which shows the clamping.
+
+numba's cache does not see edits in aero.py's column constants or random_stream.py from the
+kernels here: after changing those, delete this package's __pycache__/*.nbi and *.nbc files.
 
 Sensing: p = q·Cp, then per tap a first-order tube lag (time constant τ_i drawn once per rig in
 [tube_lag_min_s, tube_lag_max_s]), discretised exactly for pressure varying linearly between
@@ -46,10 +53,10 @@ from pressure_scanner.wing_params import WingParams
 
 N_FINE = 401  # fine-grid points per surface, leading and trailing edge included
 # α_c range: the blended lift grows monotonically with α_c over it for every separation point
-# and every α in [-5°, 45°] (checked when the tables are built); towards 45° the inviscid
-# normal force itself stops growing (C_n ∝ sin α_c cos α_c). Attached, α_c = 40° already gives
-# C_l ≈ 4.7, far above any target of the model.
-ALPHA_C_MIN_DEG, ALPHA_C_MAX_DEG, ALPHA_C_STEP_DEG = -5.0, 40.0, 0.25
+# and every α in [-5°, 45°] (checked when the tables are built; with the base-pressure floor
+# that fails first near α_c = 29° at small α and x_s). α_c = 28° attached gives C_l = 3.4 and
+# fully separated ≈ 2, above any target of the model; targets beyond are clamped (see truth).
+ALPHA_C_MIN_DEG, ALPHA_C_MAX_DEG, ALPHA_C_STEP_DEG = -5.0, 28.0, 0.25
 N_THETA = 241  # separation-point grid, uniform in θ = arccos(1 − 2 x_s)
 X_SEP_MIN = 0.005  # separation never closer to the leading edge than this (x/c)
 N_VORTEX = 131
@@ -64,7 +71,8 @@ N_POINT = 7
     range(13)
 )
 K_NCN, K_NCA, K_NCM, K_NOISE, K_DRIFT_E, K_DRIFT_S, K_SENSOR_ON, K_DBASE, K_NBASE = range(13, 22)
-N_K = 22
+K_CPB_MIN = 22
+N_K = 23
 
 # Truth columns per sample.
 T_CN, T_CA, T_CM, T_CL, T_CD, T_ALPHA_C, T_CL_TARGET = range(7)
@@ -77,12 +85,20 @@ def smoothstep(t: np.ndarray) -> np.ndarray:
     return t * t * (3.0 - 2.0 * t)
 
 
+def blend_weight(x_c: np.ndarray, x_sep: float, blend_width: float) -> np.ndarray:
+    """Weight of the attached Cp on the suction side (1 − weight: base pressure): 1 ahead of
+    x_s − w, 0 from x_s aft, smoothstep between; w = min(blend_width, x_s, 1 − x_s)."""
+    width = max(min(blend_width, x_sep, 1.0 - x_sep), 1e-9)
+    return smoothstep((x_sep - np.asarray(x_c, dtype=float)) / width)
+
+
 @dataclass(frozen=True)
 class FineGridTables:
     """Fine-grid integrals used by the synthesis kernel (working frame, module docstring).
 
     circulation: (3, n_alpha_c, N_THETA) C_n, C_a, C_m of the blended attached distribution on
         the α_c grid × separation grid.
+    alpha_c_top: (N_THETA,) last α_c index up to which the lift grows with α_c.
     vortex: (N_VORTEX, 3) C_n, C_a, C_m of a unit suction bump centred at each x_v.
     added_mass: (3,) C_n, C_a, C_m of the unit added-mass loading.
     base_speed: (N_BASE, 2) suction-side a, b on a uniform θ grid over [0, π].
@@ -93,6 +109,7 @@ class FineGridTables:
     theta_sep: np.ndarray
     vortex_x: np.ndarray
     circulation: np.ndarray
+    alpha_c_top: np.ndarray
     vortex: np.ndarray
     added_mass: np.ndarray
     base_speed: np.ndarray
@@ -108,6 +125,7 @@ def fine_grid_tables(
     vortex_half_width: float,
     vortex_start: float,
     vortex_end: float,
+    base_pressure_min: float,
 ) -> FineGridTables:
     """Build (once per shape parameter set) the fine-grid integral tables."""
     basis = speed_basis(thickness_ratio)
@@ -129,20 +147,25 @@ def fine_grid_tables(
     circulation = np.empty((3, ac.size, N_THETA))
     lower_part = cp_inv[:, ~upper] @ weights[:, ~upper].T  # (n_alpha_c, 3)
     for j in range(N_THETA):
-        w = 1.0 - smoothstep((x[upper] - x_sep[j]) / blend_width)
+        w = blend_weight(x[upper], x_sep[j], blend_width)
         v_sep = a_sep[j] * np.cos(ac) + b_sep[j] * np.sin(ac)
-        cp_base = 1.0 - v_sep * v_sep
+        cp_base = np.maximum(1.0 - v_sep * v_sep, base_pressure_min)
         cp_upper = cp_inv[:, upper] * w[None, :] + cp_base[:, None] * (1.0 - w[None, :])
         circulation[:, :, j] = (lower_part + cp_upper @ weights[:, upper].T).T
 
-    # The inversion's premise: the lift grows with α_c at every separation point and α.
-    for alpha in np.deg2rad(np.arange(-5.0, 45.1, 5.0)):
+    # The inversion's premise: the lift grows with α_c. For each separation point keep the
+    # α_c grid up to where it stops growing for any α in [-5°, 45°] (only happens with
+    # separation at the very leading edge beyond α_c ≈ 22°, far from any target there).
+    growing = np.ones((ac.size - 1, N_THETA), dtype=bool)
+    for alpha in np.deg2rad(np.arange(-5.0, 45.1, 2.5)):
         lift = circulation[0] * np.cos(alpha) - circulation[1] * np.sin(alpha)
-        if np.any(np.diff(lift, axis=0) <= 0.0):
-            raise RuntimeError(
-                "fine-grid tables: lift is not increasing in α_c at α = "
-                f"{np.rad2deg(alpha):.0f}°; narrow ALPHA_C range or change the shape parameters"
-            )
+        growing &= np.diff(lift, axis=0) > 0.0
+    alpha_c_top = np.where(growing.all(axis=0), ac.size - 1, np.argmin(growing, axis=0))
+    if np.any(alpha_c_deg[alpha_c_top] < 15.0):
+        raise RuntimeError(
+            "fine-grid tables: lift stops growing with α_c below 15° for some separation "
+            "point; change the shape parameters (blend width, base pressure floor)"
+        )
 
     vortex_x = np.linspace(vortex_start, vortex_end, N_VORTEX)
     u = (x[None, upper] - vortex_x[:, None]) / vortex_half_width
@@ -160,6 +183,7 @@ def fine_grid_tables(
         theta_sep=theta_sep,
         vortex_x=vortex_x,
         circulation=np.ascontiguousarray(circulation),
+        alpha_c_top=alpha_c_top.astype(np.int64),
         vortex=np.ascontiguousarray(vortex),
         added_mass=added_mass,
         base_speed=np.ascontiguousarray(np.stack([a_base, b_base], axis=1)),
@@ -188,10 +212,9 @@ def point_set(x_c: np.ndarray, side: np.ndarray, thickness_ratio: float) -> np.n
 
 @njit(cache=True)
 def _invert_alpha_c(
-    target: float, alpha: float, theta: float, table: np.ndarray, k: np.ndarray
+    target: float, alpha: float, theta: float, table: np.ndarray, top: np.ndarray, k: np.ndarray
 ) -> tuple[float, float, float, float]:
     """α_c whose blended distribution has lift `target` at α; returns (α_c, C_n, C_a, C_m)."""
-    n_ac = int(k[K_NAC])
     n_th = int(k[K_NTH])
     t = (theta - k[K_TH0]) / k[K_DTH]
     j = min(max(int(t), 0), n_th - 2)
@@ -205,13 +228,13 @@ def _invert_alpha_c(
         return cn * ca_ - cax * sa
 
     lo = 0
-    hi = n_ac - 1
+    hi = min(top[j], top[j + 1])
     g_lo = lift(lo)
     g_hi = lift(hi)
     if target <= g_lo:
         i, w = 0, 0.0
     elif target >= g_hi:
-        i, w = n_ac - 2, 1.0
+        i, w = hi - 1, 1.0
     else:
         while hi - lo > 1:
             mid = (lo + hi) // 2
@@ -236,6 +259,7 @@ def synthesize(
     aero_out: np.ndarray,
     points: np.ndarray,
     circulation: np.ndarray,
+    top: np.ndarray,
     vortex: np.ndarray,
     base_speed: np.ndarray,
     k: np.ndarray,
@@ -264,7 +288,7 @@ def synthesize(
         target = sign * aero_out[s_idx, aero.O_CL_CIRC]
         x_sep = min(max(aero_out[s_idx, aero.O_F], k[K_XSMIN]), 1.0)
         theta = math.acos(1.0 - 2.0 * x_sep)
-        alpha_c, cn, cax, cm = _invert_alpha_c(target, alpha_w, theta, circulation, k)
+        alpha_c, cn, cax, cm = _invert_alpha_c(target, alpha_w, theta, circulation, top, k)
         cos_c = math.cos(alpha_c)
         sin_c = math.sin(alpha_c)
         cos_w = math.cos(alpha_w)
@@ -276,8 +300,10 @@ def synthesize(
         a_s = (1.0 - wb) * base_speed[ib, 0] + wb * base_speed[ib + 1, 0]
         b_s = (1.0 - wb) * base_speed[ib, 1] + wb * base_speed[ib + 1, 1]
         v_s = a_s * cos_c + b_s * sin_c
-        cp_base = 1.0 - v_s * v_s
-        width = k[K_BLEND]
+        cp_base = max(1.0 - v_s * v_s, k[K_CPB_MIN])
+        # Blend band [x_s − w, x_s]: w shrinks to x_s at the leading edge (the leading-edge
+        # point stays attached) and to 1 − x_s at the trailing edge (f = 1 is fully attached).
+        width = max(min(k[K_BLEND], x_sep, 1.0 - x_sep), 1e-9)
         # Vortex bump amplitude for the model's vortex lift.
         x_v = aero_out[s_idx, aero.O_X_V]
         tv = min(max((x_v - k[K_XV0]) / k[K_DXV], 0.0), k[K_NXV] - 1.0)
@@ -312,8 +338,8 @@ def synthesize(
             cp = 1.0 - v * v
             xi = points[i, P_X]
             if side > 0.0:
-                ts = min(max((xi - x_sep) / width, 0.0), 1.0)
-                wgt = 1.0 - ts * ts * (3.0 - 2.0 * ts)
+                ts = min(max((x_sep - xi) / width, 0.0), 1.0)
+                wgt = ts * ts * (3.0 - 2.0 * ts)
                 cp = wgt * cp + (1.0 - wgt) * cp_base
                 u = (xi - x_v) / k[K_HV]
                 if abs(u) < 1.0:
@@ -366,6 +392,7 @@ class PressureModel:
             params.vortex_half_width_c,
             params.vortex_start_c,
             params.vortex_end_c,
+            params.base_pressure_min,
         )
         if abs(taps.thickness_ratio - params.thickness_ratio) > 1e-9:
             raise ValueError(
@@ -400,6 +427,7 @@ class PressureModel:
         k[K_DRIFT_S] = params.drift_std_pa * math.sqrt(1.0 - k[K_DRIFT_E] ** 2)
         k[K_SENSOR_ON] = 1.0
         k[K_DBASE], k[K_NBASE] = np.pi / (N_BASE - 1), N_BASE
+        k[K_CPB_MIN] = params.base_pressure_min
         self.coefficients = k
         self._clean_coefficients = k.copy()
         self._clean_coefficients[K_SENSOR_ON] = 0.0
@@ -424,6 +452,7 @@ class PressureModel:
             aero_out,
             self.points,
             t.circulation,
+            t.alpha_c_top,
             t.vortex,
             t.base_speed,
             self.coefficients,
@@ -449,6 +478,7 @@ class PressureModel:
             np.ascontiguousarray(aero_out),
             points,
             t.circulation,
+            t.alpha_c_top,
             t.vortex,
             t.base_speed,
             self._clean_coefficients,

@@ -41,6 +41,9 @@ class WingParams:
         vortex_strength_mean, vortex_strength_cv: per-stall-event log-normal strength factor.
     Pressure synthesis (pressures.py)
         separation_blend_width_c: chordwise width of the Kirchhoff blend to base pressure.
+        base_pressure_min: floor of the base pressure Cp_b (bluff-body base pressure of the
+        stalled section, Roshko, NACA TN 3169, 1954), so deep stall shows a flat suction
+        plateau over an over-pressured lower surface.
         vortex_half_width_c, vortex_start_c, vortex_end_c: the travelling suction bump.
         tube_lag_min_s, tube_lag_max_s, tube_layout_seed: per-tap first-order tube lags, drawn
         once per rig (fixed seed, not the run seed) uniformly in [min, max].
@@ -86,6 +89,7 @@ class WingParams:
     vortex_strength_cv: float = 0.3
 
     separation_blend_width_c: float = 0.05
+    base_pressure_min: float = -0.7
     vortex_half_width_c: float = 0.2
     vortex_start_c: float = 0.25
     vortex_end_c: float = 0.9
@@ -149,6 +153,8 @@ class WingParams:
                 "WingParams: the vortex bump must not reach the leading edge "
                 "(vortex_start_c >= vortex_half_width_c)"
             )
+        if not (-3.0 <= self.base_pressure_min <= 0.0):
+            raise ValueError("WingParams.base_pressure_min must lie in [-3, 0]")
         if self.separation_blend_width_c >= 0.5:
             raise ValueError("WingParams.separation_blend_width_c must be < 0.5 chords")
         if self.tube_lag_max_s < self.tube_lag_min_s:
