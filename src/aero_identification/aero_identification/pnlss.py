@@ -434,8 +434,9 @@ def fit_pnlss(
         structure: "full", "statesonly" or "inputsonly" (monomials.py).
         max_iter: number of LM trials (accepted or rejected).
         validation: (u_val, y_val), 1-D records of equal length in absolute units. The first
-            n_transient samples are left out of the validation error (the simulation starts at
-            the operating point). Used for the divergence guard and to choose the returned model.
+            min(n_transient, length // 2) samples are left out of the validation error (the
+            simulation starts at the operating point). Used for the divergence guard and to
+            choose the returned model.
         n_transient: samples prepended to each record; default: the decay time of the slowest
             linear mode to 1e-4 (at most one period).
         weighting: None (time-domain cost), "noise" (1/σ²_Y(k) per DFT bin, from the periods;
@@ -514,13 +515,14 @@ def fit_pnlss(
             raise ValueError(
                 f"validation u and y must have the same length; got {u_val.size}, {y_val.size}"
             )
-        if u_val.size <= nt or not (np.all(np.isfinite(u_val)) and np.all(np.isfinite(y_val))):
+        if u_val.size < 4 or not (np.all(np.isfinite(u_val)) and np.all(np.isfinite(y_val))):
             raise ValueError(
-                f"the validation record must be finite and longer than n_transient={nt} "
-                f"samples; got {u_val.size} samples"
+                f"the validation record must be finite with at least 4 samples; got "
+                f"{u_val.size} samples"
             )
+        nt_val = min(nt, u_val.size // 2)
         u_val_n = np.ascontiguousarray(((u_val - u_mean[0]) / u_scale[0])[None, :, None])
-        y_val_tail = y_val[nt:]
+        y_val_tail = y_val[nt_val:]
 
     # Weighting.
     sqrt_w: np.ndarray | None = None
@@ -572,7 +574,7 @@ def fit_pnlss(
     def val_cost(th: np.ndarray) -> float:
         if validation is None:
             return math.nan
-        y = y_mean[0] + y_scale[0] * simulate(th, u_val_n, np.zeros((1, nx)))[0, nt:, 0]
+        y = y_mean[0] + y_scale[0] * simulate(th, u_val_n, np.zeros((1, nx)))[0, nt_val:, 0]
         c = float(np.mean((y - y_val_tail) ** 2))
         return c if math.isfinite(c) else math.inf
 
