@@ -155,7 +155,8 @@ def default_taps_path() -> Path:
         candidates.append(Path(get_package_share_directory(_PACKAGE)) / "config" / "taps.yaml")
     except Exception:  # ament_index is absent off ROS machines, or the package is not indexed
         pass
-    for prefix in {sys.prefix, os.environ.get("COLCON_PREFIX_PATH", "")}:
+    prefixes = [sys.prefix, *os.environ.get("COLCON_PREFIX_PATH", "").split(os.pathsep)]
+    for prefix in prefixes:
         if prefix:
             candidates.append(Path(prefix) / "share" / _PACKAGE / "config" / "taps.yaml")
     for path in candidates:
