@@ -27,6 +27,12 @@ class Observer:
         stamp = stamp_to_ns(header.stamp) if header is not None else 0
         self.data[topic].append((stamp, msg))
 
+    def wait_matched(self, timeout_s: float = 30.0) -> bool:
+        """Spin until every subscription has a matched publisher (discovery done)."""
+        return self.node.spin_until(
+            lambda: all(sub.publisher_count() > 0 for sub in self.subs), timeout_s
+        )
+
     def spin_until(self, predicate: Any, timeout_s: float) -> bool:
         return self.node.spin_until(predicate, timeout_s)
 

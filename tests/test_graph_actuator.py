@@ -4,11 +4,10 @@ import json
 from pathlib import Path
 
 import numpy as np
+from graph_support import Observer
 from multisine_gen.plan import short_plan
 from pitch_actuator.dynamics import ActuatorModel
-from rig_runtime.testing import Processes, graph_env, wait_for
-
-from graph_support import Observer
+from rig_runtime.testing import Processes, graph_env
 
 TOPICS = {
     "/pitch/command": ("sensor_msgs/msg/JointState", "stream"),
@@ -28,15 +27,29 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
         with Processes(env, log_dir=tmp_path) as procs:
             procs.start_entry("pitch_actuator", "sim_actuator", "--ros-args", "-p", "seed:=5")
             gen = procs.start_entry(
-                "multisine_gen", "generator", "--ros-args",
-                "-p", "plan:=short", "-p", "seed:=3", "-p", "real_time_factor:=0.0",
-                "-p", "flow_control:=false", "-p", "wait_for_subscribers:=2",
+                "multisine_gen",
+                "generator",
+                "--ros-args",
+                "-p",
+                "plan:=short",
+                "-p",
+                "seed:=3",
+                "-p",
+                "real_time_factor:=0.0",
+                "-p",
+                "flow_control:=false",
+                "-p",
+                "wait_for_subscribers:=2",
             )
             total = plan.total_samples
             done = observer.spin_until(
-                lambda: len(observer.data["/pitch/state"]) >= total
-                and any(json.loads(m.data).get("event") == "plan_end"
-                        for _, m in observer.data["/experiment/segment"]),
+                lambda: (
+                    len(observer.data["/pitch/state"]) >= total
+                    and any(
+                        json.loads(m.data).get("event") == "plan_end"
+                        for _, m in observer.data["/experiment/segment"]
+                    )
+                ),
                 120,
             )
             assert done, procs.log("generator") + procs.log("sim_actuator")

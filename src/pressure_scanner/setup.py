@@ -18,7 +18,7 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml")),
     ],
     package_data={package_name: ["py.typed"]},
-    install_requires=["rig_runtime", "numpy>=1.26", "scipy>=1.11", "numba>=0.59"],
+    install_requires=["rig_runtime", "numpy>=1.26", "pyyaml>=6", "scipy>=1.11", "numba>=0.59"],
     zip_safe=False,
     extras_require={"test": ["pytest"]},
     maintainer="Pitching-wing rig maintainers",
@@ -28,7 +28,10 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            # ENTRY-POINTS pressure_scanner
+            "sim_wing = pressure_scanner.sim_wing_node:main",
+            "lift = pressure_scanner.lift_node:main",
+            "scanner = pressure_scanner.scanner_node:main",
+            "sim_scanner = pressure_scanner.sim_scanner:main",
         ],
     },
 )

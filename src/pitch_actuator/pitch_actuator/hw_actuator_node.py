@@ -104,6 +104,9 @@ class HwActuator:
         self._send(self.governor.update(self._now()))
         for feedback in self.link.poll():
             self.publish_state(feedback)
+            # After a controller-side watchdog hold only a new setpoint resumes motion.
+            if feedback.status & Status.WATCHDOG and self.governor.mode.value == "tracking":
+                self.sent_setpoint_deg = None
 
     def publish_state(self, feedback: Feedback) -> None:
         msg = self.node.new_message(

@@ -5,8 +5,10 @@ Reactive: every ``/pitch/command`` sample k yields one ``/pitch/state`` sample k
 stamp, so a simulated run is deterministic for a seed whatever the speed. The state carries the
 joint ``pitch`` (logged position: noise, quantisation; velocity) and, as simulation ground
 truth, the joint ``alpha_true`` (true pitch + free-stream gust), which only the simulated wing
-reads. If commands stop for ``watchdog_timeout_s`` of wall time the node keeps stepping the
-model in real time: the governor holds, then ramps to the safe angle, as the rig would.
+reads. Experiment time advances with the commands, so pauses of a slow graph are harmless;
+if commands stop for ``stream_timeout_s`` of wall time (the generator is gone) the node keeps
+stepping the model in real time: after ``watchdog_timeout_s`` more the governor holds, then
+ramps to the safe angle, as the rig would.
 ``/pitch/stop`` (std_msgs/Bool): true = stop (hold, then safe angle), false = resume.
 """
 
@@ -33,6 +35,12 @@ PARAMETERS = [
     Parameter("encoder_step_deg", 0.005, "logged-pitch quantisation [deg]", min=0.0),
     Parameter("gust_std_deg", 0.2, "free-stream gust on alpha, std [deg]", min=0.0),
     Parameter("gust_time_constant_s", 0.1, "gust correlation time [s]", min=1e-3),
+    Parameter(
+        "stream_timeout_s",
+        5.0,
+        "wall time without commands after which the simulation runs on in real time [s]",
+        min=0.01,
+    ),
     Parameter(
         "state_qos", "stream", "QoS of /pitch/state", choices=("stream", "sensor", "default")
     ),
@@ -111,9 +119,12 @@ class SimActuator:
         if self.last_stamp_ns is None:
             return
         silent = time.monotonic() - self.last_command_wall
-        if silent < self.limits.watchdog_timeout_s and not self.governor.stopped:
+        timeout = self.node.params["stream_timeout_s"]
+        if self.governor.stopped:
+            timeout = min(timeout, 2.0 / self.fs)  # a stop request needs no stream to act
+        if silent < timeout:
             return
-        due = int(silent * self.fs) - self.self_steps if not self.governor.stopped else 1
+        due = int((silent - timeout) * self.fs) + 1 - self.self_steps
         for _ in range(max(0, min(due, 50))):
             stamp_ns = self.last_stamp_ns + round(1e9 / self.fs)
             setpoint_deg = self.governor.update(self._time_s(stamp_ns))

@@ -1,0 +1,177 @@
+"""Lift node: tap pressures to force coefficients by pressure integration (DESIGN.md §6).
+
+Subscribes ``/pressure/taps`` and ``/pitch/state`` (measured pitch = geometric angle of attack)
+and publishes ``/wing/coefficients`` (geometry_msgs/Vector3Stamped: x = C_l, y = C_d (pressure),
+z = C_m about the quarter chord) with the taps' stamp: exactly one coefficients sample per taps
+sample. The pitch is matched by stamp (exact in simulation; linear interpolation between the
+neighbouring states on the rig, within ``max_alpha_gap_s``). Taps that are NaN or outside the
+scanner range are excluded; a sample whose remaining taps do not cover the surface is invalid
+and published as NaN, never as a number. Exclusions are counted on ``/diagnostics``.
+"""
+
+import bisect
+import math
+import sys
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from rig_runtime import Node, Parameter, run_node, stamp_to_ns
+
+from .integration import DEFAULT_SCANNER_RANGE_PA, PressureIntegrator
+from .tap_cloud import read_cloud
+from .taps import load_taps
+from .wing_params import WingParams
+
+PARAMETERS = [
+    Parameter(
+        "dynamic_pressure_pa",
+        WingParams().dynamic_pressure_pa,
+        "free-stream dynamic pressure q = ½ρU² [Pa] (rig: from the Pitot tube)",
+        min=1.0,
+    ),
+    Parameter("taps_file", "", "tap layout YAML (empty: the package's config/taps.yaml)"),
+    Parameter("scanner_min_pa", float(DEFAULT_SCANNER_RANGE_PA[0]), "scanner range, low [Pa]"),
+    Parameter("scanner_max_pa", float(DEFAULT_SCANNER_RANGE_PA[1]), "scanner range, high [Pa]"),
+    Parameter(
+        "max_alpha_gap_s", 0.02, "largest stamp gap to interpolate the pitch over [s]", min=0.0
+    ),
+    Parameter("max_pending", 400, "taps samples kept waiting for their pitch", min=1),
+    Parameter("diagnostics_period_s", 1.0, "period of /diagnostics status [s]", min=0.05),
+    Parameter("qos", "stream", "QoS of inputs and output", choices=("stream", "sensor", "default")),
+]
+
+HISTORY = 4000
+
+
+class Lift:
+    def __init__(self, node: Node) -> None:
+        p = node.params
+        self.node = node
+        self.q = p["dynamic_pressure_pa"]
+        self.integrator = PressureIntegrator(
+            load_taps(p["taps_file"] or None), (p["scanner_min_pa"], p["scanner_max_pa"])
+        )
+        self.n_taps = self.integrator.taps.n_taps
+        self.pitch_stamps: deque[int] = deque(maxlen=HISTORY)
+        self.pitch_values: deque[float] = deque(maxlen=HISTORY)
+        self.pending: deque[tuple[int, Any]] = deque()
+        self.counts = {"published": 0, "invalid": 0, "alpha_missing": 0}
+        self.excluded_per_tap = np.zeros(self.n_taps, dtype=np.int64)
+        self.last_reason = ""
+        self.pub = node.create_publisher(
+            "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", p["qos"]
+        )
+        self.diag = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics")
+        node.create_subscription(
+            "sensor_msgs/msg/JointState", "/pitch/state", self.on_pitch, p["qos"]
+        )
+        node.create_subscription(
+            "sensor_msgs/msg/PointCloud2", "/pressure/taps", self.on_taps, p["qos"]
+        )
+        node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
+
+    def on_pitch(self, msg: Any) -> None:
+        names = list(msg.name)
+        i = names.index("pitch") if "pitch" in names else 0
+        if i >= len(msg.position):
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        if self.pitch_stamps and stamp <= self.pitch_stamps[-1]:
+            return  # out of order or repeated: the history stays sorted
+        self.pitch_stamps.append(stamp)
+        self.pitch_values.append(float(msg.position[i]))
+        while self.pending and self._alpha(self.pending[0][0], final=False) is not None:
+            self._process(*self.pending.popleft())
+
+    def _alpha(self, stamp: int, final: bool) -> float | None:
+        stamps = self.pitch_stamps
+        if not stamps or stamp > stamps[-1]:
+            if final and stamps and stamp - stamps[-1] <= self.node.params["max_alpha_gap_s"] * 1e9:
+                return self.pitch_values[-1]
+            return None
+        i = bisect.bisect_left(stamps, stamp)
+        if stamps[i] == stamp:
+            return self.pitch_values[i]
+        if i == 0:
+            return None if not final else math.nan
+        s0, s1 = stamps[i - 1], stamps[i]
+        if s1 - s0 > self.node.params["max_alpha_gap_s"] * 1e9:
+            return math.nan
+        w = (stamp - s0) / (s1 - s0)
+        return (1 - w) * self.pitch_values[i - 1] + w * self.pitch_values[i]
+
+    def on_taps(self, msg: Any) -> None:
+        stamp = stamp_to_ns(msg.header.stamp)
+        if self.pending or self._alpha(stamp, final=False) is None:
+            self.pending.append((stamp, msg))
+            while len(self.pending) > self.node.params["max_pending"]:
+                self._process(*self.pending.popleft(), final=True)
+            return
+        self._process(stamp, msg)
+
+    def _process(self, stamp: int, msg: Any, final: bool = False) -> None:
+        alpha = self._alpha(stamp, final=True)
+        if alpha is None or not math.isfinite(alpha):
+            self.counts["alpha_missing"] += 1
+            cl = cd = cm = math.nan
+            self.last_reason = "no pitch sample near the taps' stamp"
+        else:
+            _, pressures = read_cloud(msg)
+            if len(pressures) != self.n_taps:
+                # A cloud of another layout cannot be integrated with this tap geometry.
+                pressures = np.full(self.n_taps, np.nan)
+                self.last_reason = f"cloud has {len(msg.data) // 16} points, expected {self.n_taps}"
+            c = self.integrator.integrate(pressures, alpha, self.q)
+            cl, cd, cm = float(c.cl[0]), float(c.cd[0]), float(c.cm[0])
+            self.excluded_per_tap += c.excluded[0]
+            if not c.valid[0]:
+                self.counts["invalid"] += 1
+                self.last_reason = c.describe(0)
+        out = self.node.new_message("geometry_msgs/msg/Vector3Stamped")
+        out.header.stamp = msg.header.stamp
+        out.header.frame_id = "wing"
+        out.vector.x, out.vector.y, out.vector.z = cl, cd, cm
+        self.pub.publish(out)
+        self.counts["published"] += 1
+
+    def publish_diagnostics(self) -> None:
+        excluded = {
+            self.integrator.taps.names[i]: int(n) for i, n in enumerate(self.excluded_per_tap) if n
+        }
+        problems = self.counts["invalid"] + self.counts["alpha_missing"]
+        level = 1 if problems or excluded else 0
+        values = {k: str(v) for k, v in self.counts.items()}
+        values["excluded_taps"] = ", ".join(f"{k}: {v}" for k, v in excluded.items()) or "none"
+        values["pending"] = str(len(self.pending))
+        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+        msg.status = [
+            self.node.new_message(
+                "diagnostic_msgs/msg/DiagnosticStatus",
+                level=level,
+                name=f"{self.node.name}: pressure integration",
+                message=self.last_reason or "ok",
+                hardware_id="lift",
+                values=[
+                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=v)
+                    for k, v in values.items()
+                ],
+            )
+        ]
+        self.diag.publish(msg)
+
+    def close(self) -> None:
+        while self.pending:
+            self._process(*self.pending.popleft(), final=True)
+        self.publish_diagnostics()
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(Lift, "lift", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,141 @@
+"""Hardware scanner node: a Scanivalve-style Ethernet pressure scanner (PWSC UDP frames,
+docs/protocols.md) to ``/pressure/taps``.
+
+Frames are mapped channel -> tap (``channel_to_tap``, one entry per scanner channel, -1 =
+unused), converted to Pa, checked against the scanner's full scale (beyond it: NaN, excluded by
+the lift node) and stamped with the scanner's acquisition time. Lost, duplicated and reordered
+frames are counted and reported on ``/diagnostics``, never patched. A zero (tare) is taken on
+request — wind off! — by publishing ``true`` on ``/pressure/tare`` (std_msgs/Bool): the mean of
+the next ``tare_frames`` frames becomes the per-channel offset.
+"""
+
+import sys
+import time
+from typing import Any
+
+from rig_runtime import Node, Parameter, run_node, set_stamp
+
+from .scanner_client import ScannerClient, ScannerClientConfig, TapPressures
+from .scanner_protocol import ChannelMap
+from .tap_cloud import fill_cloud
+from .taps import load_taps
+from .wing_params import WingParams
+
+PARAMETERS = [
+    Parameter("bind_host", "0.0.0.0", "interface the scanner streams to"),
+    Parameter("port", 23000, "UDP port the scanner streams to", min=0, max=65535),
+    Parameter("source_host", "", "accept frames only from this IPv4 address (empty: any)"),
+    Parameter("full_scale_pa", 2490.0, "scanner module full scale [Pa]", min=1.0),
+    Parameter(
+        "channel_to_tap", list(range(49)), "tap index read by each scanner channel (-1: none)"
+    ),
+    Parameter("taps_file", "", "tap layout YAML (empty: the package's config/taps.yaml)"),
+    Parameter("tare_frames", 400, "frames averaged by a zero (tare)", min=1),
+    Parameter("poll_rate_hz", 400.0, "how often received frames are published [Hz]", min=10.0),
+    Parameter("diagnostics_period_s", 1.0, "period of /diagnostics status [s]", min=0.05),
+    Parameter(
+        "taps_qos", "sensor", "QoS of /pressure/taps", choices=("stream", "sensor", "default")
+    ),
+]
+
+
+class Scanner:
+    def __init__(self, node: Node) -> None:
+        p = node.params
+        self.node = node
+        taps = load_taps(p["taps_file"] or None)
+        params = WingParams()
+        self.tap_xyz = taps.xyz_m(params.chord_m, params.span_m)
+        channel_map = ChannelMap(tuple(p["channel_to_tap"]), n_taps=taps.n_taps)
+        self.client = ScannerClient(
+            ScannerClientConfig(
+                channel_map=channel_map,
+                bind_host=p["bind_host"],
+                port=p["port"],
+                full_scale_pa=p["full_scale_pa"],
+                source_host=p["source_host"] or None,
+            )
+        )
+        self.pub = node.create_publisher(
+            "sensor_msgs/msg/PointCloud2", "/pressure/taps", p["taps_qos"]
+        )
+        self.diag = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics")
+        node.create_subscription("std_msgs/msg/Bool", "/pressure/tare", self.on_tare)
+        node.create_timer(1.0 / p["poll_rate_hz"], self.on_timer)
+        node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
+        self.published = 0
+        self.tare_reported = True
+        node.logger.info("listening for scanner frames on UDP port %d", self.client.port)
+
+    def on_tare(self, msg: Any) -> None:
+        if msg.data:
+            self.node.logger.warning(
+                "zero (tare) over %d frames: wind must be off", self.node.params["tare_frames"]
+            )
+            self.client.start_tare(self.node.params["tare_frames"])
+            self.tare_reported = False
+
+    def on_timer(self) -> None:
+        for frame in self.client.poll():
+            self.publish(frame)
+        result = self.client.tare_result
+        if not self.tare_reported and result is not None and not self.client.tare_in_progress:
+            self.tare_reported = True
+            self.node.logger.info(
+                "tare done over %d frames; failed channels %s, suspicious %s",
+                result.n_frames,
+                list(result.failed_channels),
+                list(result.suspicious_channels),
+            )
+
+    def publish(self, frame: TapPressures) -> None:
+        cloud = self.node.new_message("sensor_msgs/msg/PointCloud2")
+        set_stamp(cloud.header.stamp, frame.stamp_ns)
+        cloud.header.frame_id = "wing"
+        fill_cloud(cloud, self.node.new_message, self.tap_xyz, frame.pressures_pa)
+        self.pub.publish(cloud)
+        self.published += 1
+
+    def publish_diagnostics(self) -> None:
+        stats = self.client.statistics()
+        frames = stats.frames
+        lost = frames.lost
+        values = {
+            "published": str(self.published),
+            "frames_lost": str(lost),
+            "frames_duplicated": str(frames.duplicated),
+            "frames_late": str(frames.late),
+            "recent_gaps": "; ".join(str(g) for g in stats.recent_gaps[-5:]) or "none",
+            "invalid_frames": str(stats.invalid_frames),
+            "out_of_range_samples": str(stats.out_of_range_samples),
+            "missing_taps": str(list(stats.missing_taps)),
+            "tared": str(stats.tared),
+        }
+        level = 1 if lost or stats.invalid_frames or stats.missing_taps else 0
+        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+        msg.status = [
+            self.node.new_message(
+                "diagnostic_msgs/msg/DiagnosticStatus",
+                level=level,
+                name=f"{self.node.name}: pressure scanner",
+                message=f"{lost} frames lost" if lost else "ok",
+                hardware_id=f"pwsc://udp:{self.client.port}",
+                values=[
+                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=v)
+                    for k, v in values.items()
+                ],
+            )
+        ]
+        self.diag.publish(msg)
+
+    def close(self) -> None:
+        self.client.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(Scanner, "scanner", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

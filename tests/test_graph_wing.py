@@ -1,0 +1,63 @@
+"""Generator -> simulated actuator -> simulated wing -> lift, as separate processes on DDS."""
+
+import time
+from pathlib import Path
+
+import numpy as np
+from multisine_gen.plan import short_plan
+from rig_runtime.testing import Processes, graph_env
+
+from graph_support import Observer
+
+TOPICS = {
+    "/pitch/state": ("sensor_msgs/msg/JointState", "stream"),
+    "/pressure/taps": ("sensor_msgs/msg/PointCloud2", "stream"),
+    "/wing/coefficients": ("geometry_msgs/msg/Vector3Stamped", "stream"),
+}
+
+
+def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -> None:
+    env = graph_env()
+    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
+        monkeypatch.setenv(key, env[key])
+    total = short_plan(seed=1).total_samples
+    observer = Observer(TOPICS)
+    try:
+        with Processes(env, log_dir=tmp_path) as procs:
+            procs.start_entry("pitch_actuator", "sim_actuator", name="sim_actuator")
+            procs.start_entry("pressure_scanner", "sim_wing", name="sim_wing")
+            procs.start_entry("pressure_scanner", "lift", name="lift")
+            assert observer.wait_matched(30), "nodes did not come up"
+            t0 = time.monotonic()
+            procs.start_entry(
+                "multisine_gen",
+                "generator",
+                "--ros-args",
+                "-p",
+                "plan:=short",
+                "-p",
+                "seed:=1",
+                "-p",
+                "real_time_factor:=0.0",
+                "-p",
+                "flow_control:=true",
+                name="generator",
+            )
+            done = observer.spin_until(
+                lambda: len(observer.data["/wing/coefficients"]) >= total, 180
+            )
+            wall = time.monotonic() - t0
+            logs = "".join(procs.log(n) for n in ("generator", "sim_actuator", "sim_wing", "lift"))
+            assert done, logs
+    finally:
+        observer.close()
+    states = observer.stamps("/pitch/state")[:total]
+    taps = observer.stamps("/pressure/taps")[:total]
+    coeffs = observer.stamps("/wing/coefficients")[:total]
+    np.testing.assert_array_equal(states, taps)
+    np.testing.assert_array_equal(states, coeffs)
+    assert len(np.unique(coeffs)) == total
+    cl = np.array([m.vector.x for _, m in observer.data["/wing/coefficients"][:total]])
+    assert np.all(np.isfinite(cl))
+    assert 0.2 < np.median(cl) < 2.0  # lift of a wing between 0° and 25°
+    print(f"chain: {total} samples in {wall:.1f} s = {total / 200 / wall:.1f}x real time")
