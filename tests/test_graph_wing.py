@@ -4,10 +4,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from graph_support import Observer
 from multisine_gen.plan import short_plan
 from rig_runtime.testing import Processes, graph_env
-
-from graph_support import Observer
 
 TOPICS = {
     "/pitch/state": ("sensor_msgs/msg/JointState", "stream"),

@@ -1,6 +1,6 @@
 """Multivariate monomials of the PNLSS state and input, ζ(x, u) and η(x, u).
 
-Paduart et al., Automatica 46(4) 2010, eq. (2)–(3): the nonlinear terms of a polynomial
+Paduart et al., Automatica 46(4) 2010: the nonlinear terms of a polynomial
 nonlinear state-space model are all products x_1^{e_1} ⋯ x_nx^{e_nx} u_1^{e_{nx+1}} ⋯ of the
 chosen total degrees. A monomial set is stored as an integer exponent matrix of shape
 (K, nx + nu): row k holds the powers of [x; u] in monomial k.

@@ -1,7 +1,7 @@
 """Polynomial nonlinear state-space (PNLSS) model fitted by Levenberg–Marquardt.
 
 Model (Paduart et al., "Identification of nonlinear systems using polynomial nonlinear state
-space models", Automatica 46(4) 2010, eq. (1)):
+space models", Automatica 46(4) 2010):
 
     x(t+1) = A x(t) + B u(t) + E ζ(x(t), u(t))
     y(t)   = C x(t) + D u(t) + F η(x(t), u(t))
@@ -22,7 +22,7 @@ deviation on the training input. A, B, C, D, E, F are stored in these normalised
 the training-output mean plus the fitted output offset (even-degree monomials have a non-zero
 mean, so the model's output at the operating point is a parameter, not the data mean).
 
-Fit (Paduart 2010 §4; PNLSS toolbox `fLMnlssWeighted`):
+Fit (Paduart 2010; the PNLSS toolbox's weighted Levenberg–Marquardt):
 
 - start from the linear model (E = F = 0);
 - each of the P·M periods is an independent periodic record; its transient is removed by
@@ -642,7 +642,7 @@ def lm_directions(
     """SVD of the column-normalised Jacobian for the Levenberg–Marquardt step.
 
     With Jn = J diag(1/c) = U S Vᵀ and residual e, the step for damping λ is
-    δ = −diag(1/c) V diag(s/(s² + λ²)) Uᵀe (Paduart 2010 §4.2; PNLSS toolbox). Singular
+    δ = −diag(1/c) V diag(s/(s² + λ²)) Uᵀe (Paduart 2010; PNLSS toolbox). Singular
     values below the numerical tolerance are dropped and at most `rank_cap` (n_θ − nx²) kept.
 
     Args:

@@ -1,6 +1,6 @@
 """Compiled (numba) kernels of the PNLSS model: simulation and analytic Jacobian.
 
-Model (Paduart et al., Automatica 46(4) 2010, eq. (1)), in the normalised coordinates of
+Model (Paduart et al., Automatica 46(4) 2010), in the normalised coordinates of
 pnlss.py:
 
     x(t+1) = A x(t) + B u(t) + E ζ(x(t), u(t))
@@ -13,7 +13,7 @@ Parameter vector θ (the order of the Jacobian columns), row-major within each m
     θ = [vec(A), vec(B), vec(E) | vec(C), vec(D), vec(F), y_offset (optional)]
 
 The first block (nx² + nx·nu + nx·Kζ) drives the state; the state sensitivities
-x_θ = ∂x/∂θ follow the forward recursion (Paduart 2010, eq. (13)–(14))
+x_θ = ∂x/∂θ follow the forward recursion (Paduart 2010, the sensitivity equations of the LM fit)
 
     x_θ(t+1) = (A + E ∂ζ/∂x) x_θ(t) + ∂f/∂θ,       y_θ(t) = (C + F ∂η/∂x) x_θ(t) + ∂g/∂θ,
 

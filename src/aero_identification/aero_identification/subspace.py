@@ -12,7 +12,7 @@ Cost (the criterion for choosing order n and block rows r, and of the optional r
     V = Σ_k |G_model(z_k) − G_BLA(k)|² / var(k)
 
 with var the variance of the mean BLA (`BLA.var_total` by default: noise plus stochastic
-nonlinear distortions, the right weighting for a BLA; Pintelon & Schoukens 2012, §9.4).
+nonlinear distortions, the right weighting for a BLA; Pintelon & Schoukens 2012, ch. 9).
 
 Models returned are always stable (all eigenvalues of A inside the unit circle): unstable
 eigenvalues of a candidate are reflected into the unit circle (z ↦ 1/z̄, which keeps the
@@ -220,10 +220,8 @@ def _resolvents(A: np.ndarray, B: np.ndarray, C: np.ndarray, z: np.ndarray):
     nx = A.shape[0]
     Zi = z[:, None, None] * np.eye(nx)[None] - A[None]
     R = np.linalg.solve(Zi, np.broadcast_to(B.astype(complex), (z.size, *B.shape)))
-    L = np.swapaxes(
-        np.linalg.solve(np.swapaxes(Zi, 1, 2), np.broadcast_to(C.T.astype(complex),
-                                                               (z.size, *C.T.shape))), 1, 2
-    )  # fmt: skip
+    Ct = np.broadcast_to(C.T.astype(complex), (z.size, *C.T.shape))
+    L = np.swapaxes(np.linalg.solve(np.swapaxes(Zi, 1, 2), Ct), 1, 2)  # (C (zI − A)⁻¹)ᵀ solved
     return L, R
 
 
@@ -272,7 +270,7 @@ def frequency_domain_subspace(
             "or the order"
         )
     Wr = z[None, :] ** np.arange(r)[:, None]  # (r, F), McKelvey's W_r(z_k)
-    # Column block k of the data: W_r(z_k) ⊗ G_k and W_r(z_k) ⊗ I (McKelvey 1996, eq. (9)).
+    # Column block k of the data: W_r(z_k) ⊗ G_k and W_r(z_k) ⊗ I (McKelvey 1996, §III).
     # Rows (a, i) = (block a, output i), columns (k, j) = (line k, input j).
     Gbig = (Wr[:, None, :, None] * G.transpose(1, 0, 2)[None]).reshape(r * ny, F * nu)
     Wbig = (Wr[:, None, :, None] * np.eye(nu)[None, :, None, :]).reshape(r * nu, F * nu)
@@ -280,7 +278,7 @@ def frequency_domain_subspace(
     Zr = np.hstack([Z.real, Z.imag])  # real data, both signs of frequency (McKelvey §III)
     Rq = scipy.linalg.qr(Zr.T, mode="r")[0]
     L22 = Rq[r * nu : r * (nu + ny), r * nu : r * (nu + ny)].T  # G Π⊥_W = L22 Q2ᵀ
-    # Noise covariance of the projected rows (Pintelon 2002, eq. (24)): Σ_k Re(W Wᴴ ⊗ C_G,k).
+    # Noise covariance of the projected rows (Pintelon 2002, §4): Σ_k Re(W Wᴴ ⊗ C_G,k).
     CN = np.zeros((r * ny, r * ny))
     for j in range(nu):
         for i in range(ny):
@@ -379,7 +377,7 @@ def refine(
     A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray, G: np.ndarray,
     var: np.ndarray, max_nfev: int = 200,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """Weighted nonlinear least squares on all matrices (Pintelon 2002, §5; full parametrisation).
+    """Weighted nonlinear least squares on all matrices (Pintelon 2002; full parametrisation).
 
     Minimises Σ_k |G_model(z_k) − G_k|²/var_k with scipy.optimize.least_squares and the analytic
     Jacobian ∂G/∂A_ij = C(zI−A)⁻¹ e_i e_jᵀ (zI−A)⁻¹ B. The nx² similarity directions are
@@ -422,7 +420,8 @@ def refine(
 # --- the public fit -------------------------------------------------------------------------
 
 
-# Weight of the MDL-type order penalty V·(1 + k·n_θ·ln(2F)/(2F)) (Ljung 1999 §16.4 has k = 1).
+# Weight k of the order penalty V·(1 + k·n_θ·ln(2F)/(2F)); Rissanen's MDL (Ljung 1999, ch. 16)
+# has k = 1.
 # k = 1 over-fits BLAs from M = 2 realizations in about 1 of 8 cases (spurious pole pairs that
 # fit a few lines); k = 3 chose the true order in 25/25 2nd- and 10/10 4th-order trials.
 ORDER_PENALTY = 3.0
@@ -547,7 +546,7 @@ def fit_linear_ss(
         The selected stable LinearStateSpace (u_mean = y_mean = 0; see `with_operating_point`).
 
         Selection: on `bla` alone the weighted cost always falls with the order, so orders are
-        compared by V·(1 + k·n_θ·ln(2F)/(2F)) (an MDL-type penalty, Ljung 1999 §16.4, with
+        compared by V·(1 + k·n_θ·ln(2F)/(2F)) (an MDL-type penalty, Ljung 1999 ch. 16, with
         k = ORDER_PENALTY) with n_θ = n(nu+ny) + nu·ny; on a validation BLA by its plain
         weighted cost.
 

@@ -1,1 +1,2 @@
-"""Simulated dynamic-stall wing with 49 pressure taps, Scanivalve-style UDP scanner driver, lift by pressure integration."""
+"""Simulated dynamic-stall wing with 49 pressure taps, Scanivalve-style UDP scanner driver,
+lift by pressure integration."""
