@@ -270,15 +270,15 @@ def frequency_domain_subspace(
             "or the order"
         )
     Wr = z[None, :] ** np.arange(r)[:, None]  # (r, F), McKelvey's W_r(z_k)
-    # Column block k of the data: W_r(z_k) ⊗ G_k and W_r(z_k) ⊗ I (McKelvey 1996, §III).
+    # Column block k of the data: W_r(z_k) ⊗ G_k and W_r(z_k) ⊗ I (McKelvey 1996).
     # Rows (a, i) = (block a, output i), columns (k, j) = (line k, input j).
     Gbig = (Wr[:, None, :, None] * G.transpose(1, 0, 2)[None]).reshape(r * ny, F * nu)
     Wbig = (Wr[:, None, :, None] * np.eye(nu)[None, :, None, :]).reshape(r * nu, F * nu)
     Z = np.vstack([Wbig, Gbig])
-    Zr = np.hstack([Z.real, Z.imag])  # real data, both signs of frequency (McKelvey §III)
+    Zr = np.hstack([Z.real, Z.imag])  # real data, both signs of frequency (McKelvey 1996)
     Rq = scipy.linalg.qr(Zr.T, mode="r")[0]
     L22 = Rq[r * nu : r * (nu + ny), r * nu : r * (nu + ny)].T  # G Π⊥_W = L22 Q2ᵀ
-    # Noise covariance of the projected rows (Pintelon 2002, §4): Σ_k Re(W Wᴴ ⊗ C_G,k).
+    # Noise covariance of the projected rows (Pintelon 2002): Σ_k Re(W Wᴴ ⊗ C_G,k).
     CN = np.zeros((r * ny, r * ny))
     for j in range(nu):
         for i in range(ny):
