@@ -35,7 +35,7 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            # ENTRY-POINTS aero_identification
+            "identifier = aero_identification.identifier_node:main",
         ],
     },
 )

@@ -37,7 +37,8 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            # ENTRY-POINTS aero_rig
+            "aero-rig = aero_rig.cli:main",
+            "view = aero_rig.view:main",
         ],
     },
 )

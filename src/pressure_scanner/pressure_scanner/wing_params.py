@@ -78,15 +78,15 @@ class WingParams:
 
     alpha_stall_deg: float = 22.0
     alpha_reattach_deg: float = 16.5
-    switch_spread_deg: float = 0.7
-    switch_time_s: float = 0.2
-    separation_noise_std: float = 0.04
+    switch_spread_deg: float = 0.5
+    switch_time_s: float = 0.03
+    separation_noise_std: float = 0.03
     separation_noise_time_s: float = 0.05
 
     vortex_lag_tu: float = 6.0
     vortex_travel_tu: float = 11.0
     vortex_strength_mean: float = 1.0
-    vortex_strength_cv: float = 0.3
+    vortex_strength_cv: float = 0.15
 
     separation_blend_width_c: float = 0.05
     base_pressure_min: float = -0.7

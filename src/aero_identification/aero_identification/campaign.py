@@ -1,0 +1,203 @@
+"""Cutting a campaign's samples into periods and sine records, by the experiment plan.
+
+The generator stamps command sample k at t0 + k/fs (DESIGN.md §5) and publishes the plan with
+``t0_ns``; measured pitch and C_l keep those stamps, so every sample maps back to its plan index
+k = round((stamp − t0)·fs). :class:`CampaignAssembler` stores, in arrays sized by the plan (so
+memory is bounded however long the run), the samples that fall in measured multisine periods
+and measured sine periods. A period with a missing, duplicated or invalid (NaN) sample is
+excluded and reported, never patched. The same assembler serves the online identifier and the
+offline fit from a bag, so both see identical data.
+"""
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class PeriodBlock:
+    """Measured periods of one multisine realization of one level.
+
+    u, y: (N, P) input [deg] and output (C_l) per sample and period, NaN where missing;
+    count: (N, P) how many samples arrived for each slot (1 = good; 0 missing; >1 duplicated).
+    """
+
+    level: int
+    realization: int
+    offset_deg: float
+    N: int
+    P: int
+    u: np.ndarray
+    y: np.ndarray
+    count_u: np.ndarray
+    count_y: np.ndarray
+
+    @classmethod
+    def empty(
+        cls, level: int, realization: int, offset_deg: float, N: int, P: int
+    ) -> "PeriodBlock":
+        nan = np.full((N, P), np.nan)
+        zero = np.zeros((N, P), dtype=np.int32)
+        return cls(level, realization, offset_deg, N, P, nan.copy(), nan.copy(), zero, zero.copy())
+
+    def period_valid(self) -> np.ndarray:
+        """(P,) True where every sample of the period arrived exactly once and is finite."""
+        ok = (self.count_u == 1) & (self.count_y == 1) & np.isfinite(self.u) & np.isfinite(self.y)
+        return ok.all(axis=0)
+
+    def period_problem(self, p: int) -> str:
+        """Why period p is excluded ('' if it is valid)."""
+        problems = []
+        for name, count, values in (("pitch", self.count_u, self.u), ("C_l", self.count_y, self.y)):
+            missing = int(np.sum(count[:, p] == 0))
+            dup = int(np.sum(count[:, p] > 1))
+            bad = int(np.sum((count[:, p] >= 1) & ~np.isfinite(values[:, p])))
+            if missing:
+                problems.append(f"{missing} {name} samples missing")
+            if dup:
+                problems.append(f"{dup} {name} samples duplicated")
+            if bad:
+                problems.append(f"{bad} invalid {name} samples")
+        return ", ".join(problems)
+
+
+@dataclass
+class SineRecord:
+    """The measured periods of one single-sine test (settling periods excluded)."""
+
+    index: int
+    level: int
+    offset_deg: float
+    frequency_hz: float
+    amplitude_deg: float
+    samples_per_period: int
+    periods: int
+    u: np.ndarray  # (n,) input [deg]
+    y: np.ndarray  # (n,) C_l
+    count_u: np.ndarray
+    count_y: np.ndarray
+
+    def valid(self) -> bool:
+        return bool(
+            np.all(self.count_u == 1)
+            and np.all(self.count_y == 1)
+            and np.all(np.isfinite(self.u))
+            and np.all(np.isfinite(self.y))
+        )
+
+
+@dataclass
+class _Slot:
+    """Where plan sample k goes: a period block column or a sine record offset."""
+
+    kind: str  # "multisine" | "sine"
+    key: Any
+    start_k: int
+    length: int
+    column: int
+
+
+@dataclass
+class CampaignAssembler:
+    """Collects measured samples into the plan's periods (see module docstring)."""
+
+    plan: dict[str, Any]
+    t0_ns: int
+    blocks: dict[tuple[int, int], PeriodBlock] = field(default_factory=dict)
+    sines: dict[int, SineRecord] = field(default_factory=dict)
+    outside: int = 0  # samples not in any measured period (ramps, settling, baseline)
+
+    def __post_init__(self) -> None:
+        self.fs = float(self.plan["fs"])
+        self.period_ns = 1e9 / self.fs
+        self._slots: list[_Slot] = []
+        for seg in self.plan["segments"]:
+            if seg["kind"] == "multisine" and seg.get("period") is not None:
+                key = (int(seg["level"]), int(seg["realization"]))
+                if key not in self.blocks:
+                    level = next(lv for lv in self.plan["levels"] if lv["level"] == key[0])
+                    self.blocks[key] = PeriodBlock.empty(
+                        key[0],
+                        key[1],
+                        float(seg["offset_deg"]),
+                        int(seg["samples_per_period"]),
+                        int(level["periods"]),
+                    )
+                self._slots.append(
+                    _Slot(
+                        "multisine",
+                        key,
+                        int(seg["start_k"]),
+                        int(seg["length"]),
+                        int(seg["period"]),
+                    )
+                )
+            elif seg["kind"] == "sine":
+                idx = int(seg["sine_test"])
+                n = int(seg["length"])
+                self.sines[idx] = SineRecord(
+                    idx,
+                    int(seg["level"]),
+                    float(seg["offset_deg"]),
+                    float(seg["frequency_hz"]),
+                    float(seg["amplitude_deg"]),
+                    int(seg["samples_per_period"]),
+                    int(seg["periods"]),
+                    np.full(n, np.nan),
+                    np.full(n, np.nan),
+                    np.zeros(n, dtype=np.int32),
+                    np.zeros(n, dtype=np.int32),
+                )
+                self._slots.append(_Slot("sine", idx, int(seg["start_k"]), n, 0))
+        self._slots.sort(key=lambda s: s.start_k)
+        self._starts = np.array([s.start_k for s in self._slots], dtype=np.int64)
+
+    def index_of(self, stamp_ns: int) -> int:
+        return round((stamp_ns - self.t0_ns) / self.period_ns)
+
+    def _slot(self, k: int) -> _Slot | None:
+        i = int(np.searchsorted(self._starts, k, side="right")) - 1
+        if i < 0:
+            return None
+        slot = self._slots[i]
+        return slot if k < slot.start_k + slot.length else None
+
+    def add(self, channel: str, stamp_ns: int, value: float) -> None:
+        """Store one sample of ``channel`` ("u": pitch [deg], "y": C_l) at its stamp."""
+        k = self.index_of(stamp_ns)
+        slot = self._slot(k)
+        if slot is None:
+            self.outside += 1
+            return
+        offset = k - slot.start_k
+        if slot.kind == "multisine":
+            block = self.blocks[slot.key]
+            values, counts = (
+                (block.u, block.count_u) if channel == "u" else (block.y, block.count_y)
+            )
+            values[offset, slot.column] = value
+            counts[offset, slot.column] += 1
+        else:
+            rec = self.sines[slot.key]
+            values, counts = (rec.u, rec.count_u) if channel == "u" else (rec.y, rec.count_y)
+            values[offset] = value
+            counts[offset] += 1
+
+    def add_many(self, channel: str, stamps_ns: Iterable[int], values: Iterable[float]) -> None:
+        for stamp, value in zip(stamps_ns, values, strict=True):
+            self.add(channel, int(stamp), float(value))
+
+    def realization_end_k(self, level: int, realization: int) -> int:
+        """Plan index of the last sample of a realization's measured periods."""
+        ends = [
+            s.start_k + s.length - 1
+            for s in self._slots
+            if s.kind == "multisine" and s.key == (level, realization)
+        ]
+        return max(ends)
+
+    def sine_end_k(self, index: int) -> int:
+        slot = next(s for s in self._slots if s.kind == "sine" and s.key == index)
+        return slot.start_k + slot.length - 1

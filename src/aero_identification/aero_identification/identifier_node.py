@@ -1,0 +1,297 @@
+"""Identifier node: buffers periods while the experiment runs and refits the models online.
+
+Subscribes ``/experiment/plan`` (latched; gives t0 and the segments), ``/pitch/state``
+(measured pitch -> input, degrees), ``/wing/coefficients`` (C_l -> output) and
+``/experiment/segment``. Samples are aligned by stamp into the plan's periods (campaign.py);
+periods with gaps, duplicates or invalid samples are excluded and reported. After every
+completed multisine realization and every completed sine test it re-clusters and refits BLA,
+BLA state space and PNLSS (pipeline.py) in a worker process, so intake never stalls, and
+publishes ``/identification/model`` (JSON, latched) and ``/identification/status``
+(DiagnosticArray, latched). After ``plan_end`` it runs the final identification, writes models
+and the report (Table 1 Markdown/CSV, PNG figures) to ``output_dir`` and, with
+``exit_after_final``, exits (the campaign's end).
+"""
+
+import json
+import math
+import multiprocessing
+import sys
+import time
+import traceback
+from concurrent.futures import Future, ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from rig_runtime import Node, Parameter, run_node, stamp_to_ns
+
+from .campaign import CampaignAssembler
+from .pipeline import IdentificationConfig, IdentificationResult, identify, write_report
+
+PARAMETERS = [
+    Parameter("output_dir", "", "run directory for models.json and the report ('' = none)"),
+    Parameter("nx", 1, "states of the BLA state-space and PNLSS models (paper: 1)", min=1, max=6),
+    Parameter("degrees", [2, 3, 4, 5], "PNLSS monomial degrees (paper: 2..5)", min=2, max=7),
+    Parameter("structure", "full", "PNLSS monomials", choices=("full", "statesonly", "inputsonly")),
+    Parameter("max_iter", 100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000),
+    Parameter("estimation_realization", 0, "realization of every level used for estimation", min=0),
+    Parameter("validation_realization", 1, "realization used for validation", min=0),
+    Parameter("use_worker", True, "refit in a worker process (false: inline, for debugging)"),
+    Parameter("exit_after_final", True, "exit once the final identification is published"),
+    Parameter("max_early_samples", 20000, "samples kept while waiting for the plan", min=0),
+]
+
+
+def _refit(
+    assembler: CampaignAssembler, config: IdentificationConfig, final: bool, out_dir: str
+) -> tuple[IdentificationResult, list[str]]:
+    """Worker-process job: identify and, when final, write the report."""
+    result = identify(assembler, config, final=final)
+    written: list[str] = []
+    if out_dir and final:
+        written = [str(p) for p in write_report(result, assembler, out_dir).values()]
+    return result, written
+
+
+class Identifier:
+    def __init__(self, node: Node) -> None:
+        p = node.params
+        self.node = node
+        self.config = IdentificationConfig(
+            nx=p["nx"],
+            degrees=tuple(p["degrees"]),
+            structure=p["structure"],
+            max_iter=p["max_iter"],
+            estimation_realization=p["estimation_realization"],
+            validation_realization=p["validation_realization"],
+        )
+        if self.config.estimation_realization == self.config.validation_realization:
+            raise ValueError(
+                "parameters 'estimation_realization' and 'validation_realization' must differ"
+            )
+        self.out_dir = p["output_dir"]
+        self.assembler: CampaignAssembler | None = None
+        self.early: list[tuple[str, int, float]] = []
+        self.last_k = {"u": -1, "y": -1}
+        self.pending: list[tuple[int, bool, str]] = []  # (needed k, final, reason)
+        self.future: Future[tuple[IdentificationResult, list[str]]] | None = None
+        self.future_reason = ""
+        self.refit_started = 0.0
+        self.refits = 0
+        self.refit_times: list[float] = []
+        self.last_result: IdentificationResult | None = None
+        self.errors: list[str] = []
+        self.final_done = False
+        self.samples = {"u": 0, "y": 0}
+        self.executor: ProcessPoolExecutor | None = None
+        if p["use_worker"]:
+            self.executor = ProcessPoolExecutor(
+                max_workers=1, mp_context=multiprocessing.get_context("spawn")
+            )
+        self.model_pub = node.create_publisher(
+            "std_msgs/msg/String", "/identification/model", "latched"
+        )
+        self.status_pub = node.create_publisher(
+            "diagnostic_msgs/msg/DiagnosticArray", "/identification/status", "latched"
+        )
+        node.create_subscription("std_msgs/msg/String", "/experiment/plan", self.on_plan, "latched")
+        node.create_subscription(
+            "sensor_msgs/msg/JointState", "/pitch/state", self.on_state, "stream"
+        )
+        node.create_subscription(
+            "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", self.on_coefficients, "stream"
+        )
+        node.create_subscription(
+            "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events"
+        )
+        node.create_timer(0.1, self.on_timer)
+        node.create_timer(1.0, self.publish_status)
+        self.publish_status()
+
+    # -- intake ---------------------------------------------------------------------------
+    def on_plan(self, msg: Any) -> None:
+        plan = json.loads(msg.data)
+        if self.assembler is not None and plan.get("t0_ns") == self.assembler.t0_ns:
+            return
+        self.assembler = CampaignAssembler(plan, int(plan["t0_ns"]))
+        self.node.logger.info(
+            "plan received: %d segments, %d multisine blocks, %d sine tests",
+            len(plan["segments"]),
+            len(self.assembler.blocks),
+            len(self.assembler.sines),
+        )
+        for channel, stamp, value in self.early:
+            self._add(channel, stamp, value)
+        self.early.clear()
+
+    def _add(self, channel: str, stamp: int, value: float) -> None:
+        if self.assembler is None:
+            if len(self.early) < self.node.params["max_early_samples"]:
+                self.early.append((channel, stamp, value))
+            return
+        self.assembler.add(channel, stamp, value)
+        self.samples[channel] += 1
+        self.last_k[channel] = max(self.last_k[channel], self.assembler.index_of(stamp))
+
+    def on_state(self, msg: Any) -> None:
+        names = list(msg.name)
+        i = names.index("pitch") if "pitch" in names else 0
+        value = math.degrees(float(msg.position[i])) if i < len(msg.position) else math.nan
+        self._add("u", stamp_to_ns(msg.header.stamp), value)
+
+    def on_coefficients(self, msg: Any) -> None:
+        self._add("y", stamp_to_ns(msg.header.stamp), float(msg.vector.x))
+
+    def on_segment(self, msg: Any) -> None:
+        event = json.loads(msg.data)
+        if self.assembler is None:
+            return
+        kind = event.get("event")
+        if kind == "plan_end":
+            self.pending.append((int(event["samples"]) - 1, True, "plan end"))
+        elif kind == "plan_aborted":
+            self.pending.append((int(event["samples"]) - 1, True, "plan aborted"))
+        elif kind == "end" and event.get("kind") == "multisine":
+            level, real = int(event["level"]), int(event["realization"])
+            block = self.assembler.blocks.get((level, real))
+            if block is not None and int(event.get("period", -1)) == block.P - 1:
+                end_k = int(event["start_k"]) + int(event["length"]) - 1
+                self.pending.append((end_k, False, f"level {level} realization {real} complete"))
+        elif kind == "end" and event.get("kind") == "sine":
+            end_k = int(event["start_k"]) + int(event["length"]) - 1
+            self.pending.append(
+                (end_k, False, f"sine {event.get('frequency_hz')} Hz at {event.get('offset_deg')}°")
+            )
+
+    # -- refits ---------------------------------------------------------------------------
+    def on_timer(self) -> None:
+        if self.future is not None and self.future.done():
+            self._collect()
+        if self.future is not None or not self.pending or self.assembler is None:
+            return
+        have = min(self.last_k["u"], self.last_k["y"])
+        ready = [item for item in self.pending if item[0] <= have]
+        if not ready:
+            return
+        # One refit covers every realization completed so far; the final one wins.
+        final = any(item[1] for item in ready)
+        reason = "; ".join(item[2] for item in ready)
+        self.pending = [item for item in self.pending if item[0] > have]
+        self._start_refit(final, reason)
+
+    def _start_refit(self, final: bool, reason: str) -> None:
+        assert self.assembler is not None
+        self.refit_started = time.monotonic()
+        self.future_reason = reason
+        self.node.logger.info(
+            "refit %d (%s)%s", self.refits + 1, reason, " [final]" if final else ""
+        )
+        if self.executor is not None:
+            self.future = self.executor.submit(
+                _refit, self.assembler, self.config, final, self.out_dir
+            )
+        else:
+            done: Future[tuple[IdentificationResult, list[str]]] = Future()
+            try:
+                done.set_result(_refit(self.assembler, self.config, final, self.out_dir))
+            except Exception as exc:
+                done.set_exception(exc)
+            self.future = done
+
+    def _collect(self) -> None:
+        assert self.future is not None
+        elapsed = time.monotonic() - self.refit_started
+        try:
+            result, written = self.future.result()
+        except Exception as exc:
+            detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            self.errors.append(f"refit failed ({self.future_reason}): {detail}")
+            self.node.logger.error("%s; the previous models are kept", self.errors[-1])
+            self.future = None
+            self.publish_status()
+            return
+        self.future = None
+        self.refits += 1
+        self.refit_times.append(elapsed)
+        self.last_result = result
+        payload = result.to_json_dict()
+        payload["refit"] = self.refits
+        payload["refit_s"] = elapsed
+        payload["reason"] = self.future_reason
+        self.model_pub.publish(
+            self.node.new_message("std_msgs/msg/String", data=json.dumps(payload, allow_nan=True))
+        )
+        self.node.logger.info(
+            "refit %d done in %.2f s; %d warning(s)", self.refits, elapsed, len(result.warnings)
+        )
+        for warning in result.warnings:
+            self.node.logger.warning("%s", warning)
+        if result.complete:
+            self.final_done = True
+            if written:
+                self.node.logger.info("report written to %s", Path(self.out_dir).resolve())
+            self.node.logger.info(
+                "final Table 1 (trained on all levels):\n%s", result.tables()["all_levels"][0]
+            )
+        self.publish_status()
+        if result.complete and self.node.params["exit_after_final"]:
+            self.node.request_shutdown(0)
+
+    # -- status ---------------------------------------------------------------------------
+    def publish_status(self) -> None:
+        values: dict[str, str] = {
+            "state": "done" if self.final_done else ("refitting" if self.future else "collecting"),
+            "refits": str(self.refits),
+            "last_refit_s": f"{self.refit_times[-1]:.2f}" if self.refit_times else "",
+            "max_refit_s": f"{max(self.refit_times):.2f}" if self.refit_times else "",
+            "pitch_samples": str(self.samples["u"]),
+            "cl_samples": str(self.samples["y"]),
+        }
+        if self.assembler is not None:
+            for (level, real), block in sorted(self.assembler.blocks.items()):
+                valid = int(block.period_valid().sum())
+                values[f"level {level} realization {real} valid periods"] = f"{valid}/{block.P}"
+        excluded: list[str] = []
+        if self.last_result is not None:
+            for lv in self.last_result.levels.values():
+                if lv.clusters is not None:
+                    values[f"{lv.name} clusters"] = (
+                        f"k={lv.clusters.k}, sizes={list(map(int, lv.clusters.sizes))}"
+                    )
+                excluded += [f"{lv.name}: {e}" for e in lv.excluded]
+        if excluded:
+            values["excluded periods"] = "; ".join(excluded)
+        if self.errors:
+            values["errors"] = "; ".join(self.errors[-3:])
+        warnings = self.last_result.warnings if self.last_result else []
+        if warnings:
+            values["warnings"] = "; ".join(warnings)
+        level = 2 if self.errors else (1 if excluded or warnings else 0)
+        message = values["state"]
+        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+        msg.status = [
+            self.node.new_message(
+                "diagnostic_msgs/msg/DiagnosticStatus",
+                level=level,
+                name=f"{self.node.name}: identification",
+                message=message,
+                hardware_id="identifier",
+                values=[
+                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=v)
+                    for k, v in values.items()
+                ],
+            )
+        ]
+        self.status_pub.publish(msg)
+
+    def close(self) -> None:
+        if self.executor is not None:
+            self.executor.shutdown(wait=False, cancel_futures=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(Identifier, "identifier", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,488 @@
+"""The identification pipeline of a campaign (DESIGN.md §1, §7), shared by the online
+identifier node and the offline fit from a bag.
+
+Per level: period clustering (k-means; the dominant cluster is kept), robust BLA over the two
+realizations with noise and nonlinear-distortion levels. Models, as in the paper (§4.1):
+
+- "all levels" (default): the PNLSS model is estimated on one realization of every level,
+  concatenated (realization ``estimation_realization``), and the other realization is its
+  validation set (model selection and the divergence guard). The linear models of this table are
+  the BLA of each level (BLA FRF) and the state-space model fitted to it (BLA SS): a linear model
+  is only valid around its own operating point.
+- "level 1" (the paper's Table 1): BLA FRF, BLA SS and PNLSS all trained on the lowest level.
+
+Every model is tested on the single-sine records (unseen data): relative RMS error
+rms(y − ŷ)/rms(y − mean y). BLA FRF and BLA SS map deviations around the operating point, so
+their prediction is centred on the sine record's measured mean; PNLSS predicts absolute C_l.
+Models are simulated in periodic steady state (the record's last period is prepended and
+dropped), like the measured data.
+"""
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .bla import BLA, estimate_bla
+from .campaign import CampaignAssembler, PeriodBlock, SineRecord
+from .clustering import ClusterResult, period_clusters
+from .data import PeriodicData
+from .metrics import predict_bla_sine, relative_rms_error
+from .pnlss import PNLSSModel, fit_pnlss
+from .subspace import LinearStateSpace, fit_linear_ss
+
+LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
+
+
+@dataclass(frozen=True)
+class IdentificationConfig:
+    """Hyperparameters of the pipeline (the identifier node's parameters)."""
+
+    nx: int = 1  # states of BLA SS and PNLSS (paper: 1)
+    degrees: tuple[int, ...] = (2, 3, 4, 5)  # PNLSS monomial degrees (paper: 2..5)
+    structure: str = "full"
+    max_iter: int = 100  # LM iterations (the paper used 50 for its order scan)
+    estimation_realization: int = 0
+    validation_realization: int = 1
+    min_periods: int = 2
+
+
+@dataclass
+class LevelResult:
+    level: int
+    name: str
+    offset_deg: float
+    clusters: ClusterResult | None = None
+    bla: BLA | None = None
+    linear: LinearStateSpace | None = None
+    periods_used: int = 0
+    excluded: list[str] = field(default_factory=list)
+
+
+@dataclass
+class IdentificationResult:
+    config: IdentificationConfig
+    fs: float
+    levels: dict[int, LevelResult] = field(default_factory=dict)
+    pnlss_all: PNLSSModel | None = None
+    pnlss_level1: PNLSSModel | None = None
+    linear_level1: LinearStateSpace | None = None
+    errors_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    errors_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    predictions: list[dict[str, Any]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    timings_s: dict[str, float] = field(default_factory=dict)
+    complete: bool = False
+
+    @property
+    def level_names(self) -> list[str]:
+        return [r.name for r in sorted(self.levels.values(), key=lambda r: r.offset_deg)]
+
+    @property
+    def sine_freqs(self) -> list[float]:
+        return sorted({round(k[2], 6) for k in (*self.errors_all, *self.errors_level1)})
+
+    def tables(self) -> dict[str, tuple[str, str]]:
+        from .report import table1
+
+        levels, freqs = self.level_names, self.sine_freqs
+        return {
+            "all_levels": table1(self.errors_all, levels, freqs),
+            "level1": table1(self.errors_level1, levels, freqs),
+        }
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The /identification/model payload (also models.json in the run directory)."""
+        levels: dict[str, Any] = {}
+        for lv in self.levels.values():
+            entry: dict[str, Any] = {"name": lv.name, "offset_deg": lv.offset_deg}
+            entry["periods_used"] = lv.periods_used
+            entry["excluded_periods"] = lv.excluded
+            if lv.bla is not None:
+                entry["bla"] = {
+                    "freq_hz": lv.bla.freq.tolist(),
+                    "G_re": lv.bla.G.real.tolist(),
+                    "G_im": lv.bla.G.imag.tolist(),
+                    "var_noise": lv.bla.var_noise.tolist(),
+                    "var_total": lv.bla.var_total.tolist(),
+                    "var_nl": lv.bla.var_nl.tolist(),
+                }
+            if lv.clusters is not None:
+                entry["clusters"] = {
+                    "labels": lv.clusters.labels.tolist(),
+                    "k": int(lv.clusters.k),
+                    "dominant": int(lv.clusters.dominant),
+                    "sizes": [int(s) for s in lv.clusters.sizes],
+                }
+            if lv.linear is not None:
+                entry["bla_ss"] = lv.linear.to_dict()
+            levels[str(lv.level)] = entry
+        tables = self.tables()
+        return {
+            "complete": self.complete,
+            "config": {
+                "nx": self.config.nx,
+                "degrees": list(self.config.degrees),
+                "structure": self.config.structure,
+                "max_iter": self.config.max_iter,
+            },
+            "levels": levels,
+            "models": {
+                "pnlss_all_levels": self.pnlss_all.to_dict() if self.pnlss_all else None,
+                "pnlss_level1": self.pnlss_level1.to_dict() if self.pnlss_level1 else None,
+                "bla_ss_level1": self.linear_level1.to_dict() if self.linear_level1 else None,
+            },
+            "errors": {
+                "all_levels": [[m, lv, f, e] for (m, lv, f), e in self.errors_all.items()],
+                "level1": [[m, lv, f, e] for (m, lv, f), e in self.errors_level1.items()],
+            },
+            "table1": {"markdown": tables["all_levels"][0], "markdown_level1": tables["level1"][0]},
+            "predictions": self.predictions,
+            "warnings": self.warnings,
+            "timings_s": self.timings_s,
+        }
+
+
+def _level_names(assembler: CampaignAssembler) -> dict[int, str]:
+    levels = sorted(assembler.plan["levels"], key=lambda lv: _level_offset(assembler, lv["level"]))
+    names = LEVEL_NAMES.get(len(levels), [f"level {i + 1}" for i in range(len(levels))])
+    return {lv["level"]: names[i] for i, lv in enumerate(levels)}
+
+
+def _level_offset(assembler: CampaignAssembler, level: int) -> float:
+    for (lv, _), block in assembler.blocks.items():
+        if lv == level:
+            return block.offset_deg
+    return 0.0
+
+
+def _valid_periods(block: PeriodBlock) -> np.ndarray:
+    return np.flatnonzero(block.period_valid())
+
+
+def _periodic(blocks: list[PeriodBlock], fs: float, lines: np.ndarray, count: int) -> PeriodicData:
+    """(N, count, M) data from the latest `count` valid periods of each block."""
+    us, ys = [], []
+    for block in blocks:
+        cols = _valid_periods(block)[-count:]
+        us.append(block.u[:, cols])
+        ys.append(block.y[:, cols])
+    return PeriodicData(np.stack(us, axis=2), np.stack(ys, axis=2), fs, lines)
+
+
+def _excited_lines(assembler: CampaignAssembler, level: int, realization: int) -> np.ndarray:
+    lv = next(x for x in assembler.plan["levels"] if x["level"] == level)
+    return np.asarray(lv["realizations"][realization]["excited_lines"], dtype=int)
+
+
+def _steady_state(model: Any, u: np.ndarray, spp: int) -> np.ndarray:
+    """Simulate in periodic steady state: prepend the last period, drop it from the output."""
+    u_ext = np.concatenate([u[-spp:], u])
+    return np.asarray(model.simulate(u_ext))[spp:]
+
+
+def identify(
+    assembler: CampaignAssembler,
+    config: IdentificationConfig | None = None,
+    final: bool = False,
+) -> IdentificationResult:
+    """Run the pipeline on whatever the assembler holds so far (partial results early on)."""
+    config = config or IdentificationConfig()
+    fs = assembler.fs
+    result = IdentificationResult(config=config, fs=fs, complete=final)
+    names = _level_names(assembler)
+    level_ids = sorted(names, key=lambda lv: _level_offset(assembler, lv))
+    est, val = config.estimation_realization, config.validation_realization
+    t_start = time.perf_counter()
+
+    # 1. Per level: clustering of both realizations' periods and the robust BLA.
+    for level in level_ids:
+        res = LevelResult(level, names[level], _level_offset(assembler, level))
+        result.levels[level] = res
+        blocks = [assembler.blocks.get((level, m)) for m in (est, val)]
+        if any(b is None for b in blocks):
+            continue
+        for b in blocks:
+            assert b is not None
+            for p in range(b.P):
+                problem = b.period_problem(p)
+                if problem and np.any(b.count_u[:, p] + b.count_y[:, p]):
+                    res.excluded.append(f"realization {b.realization} period {p}: {problem}")
+        counts = [len(_valid_periods(b)) for b in blocks if b is not None]
+        if min(counts) < config.min_periods:
+            continue
+        data = _periodic(
+            [b for b in blocks if b is not None],
+            fs,
+            _excited_lines(assembler, level, est),
+            min(counts),
+        )
+        try:
+            res.clusters = period_clusters(data)
+            kept = data.select(res.clusters.keep, min_periods=config.min_periods)
+            if kept.M < 2:
+                result.warnings.append(
+                    f"level {res.name}: the dominant cluster leaves < 2 realizations; "
+                    "BLA from all valid periods"
+                )
+                kept = data
+            res.periods_used = kept.P * kept.M
+            res.bla = estimate_bla(kept, method="robust")
+            res.linear = fit_linear_ss(res.bla, nx=config.nx).with_operating_point(
+                float(np.mean(kept.u)), float(np.mean(kept.y))
+            )
+        except ValueError as exc:
+            result.warnings.append(f"level {res.name}: {exc}")
+    result.timings_s["bla"] = time.perf_counter() - t_start
+
+    low = result.levels.get(level_ids[0]) if level_ids else None
+    result.linear_level1 = low.linear if low else None
+
+    # 2. PNLSS on every level (estimation realization), validated on the other realization.
+    t0 = time.perf_counter()
+    ready = [
+        lv
+        for lv in level_ids
+        if (lv, est) in assembler.blocks
+        and (lv, val) in assembler.blocks
+        and len(_valid_periods(assembler.blocks[(lv, est)])) >= config.min_periods
+        and len(_valid_periods(assembler.blocks[(lv, val)])) >= 1
+    ]
+    if result.linear_level1 is not None and ready:
+        result.pnlss_all = _fit_pnlss(assembler, ready, result, config, "all levels")
+        result.pnlss_level1 = (
+            _fit_pnlss(assembler, [level_ids[0]], result, config, "level 1")
+            if level_ids[0] in ready
+            else None
+        )
+    result.timings_s["pnlss"] = time.perf_counter() - t0
+
+    # 3. Validation on the single sines.
+    _validate_on_sines(assembler, result, names)
+    result.timings_s["total"] = time.perf_counter() - t_start
+    return result
+
+
+def _kept_columns(
+    assembler: CampaignAssembler, result: IdentificationResult, level: int, m: int
+) -> np.ndarray:
+    """Valid periods of (level, m) that the level's clustering kept (all valid if no clusters)."""
+    block = assembler.blocks[(level, m)]
+    valid = _valid_periods(block)
+    clusters = result.levels[level].clusters
+    if clusters is None:
+        return valid
+    # Clustering ran on the latest `count` valid periods of each realization.
+    count = clusters.labels.shape[0]
+    order = [result.config.estimation_realization, result.config.validation_realization]
+    column = order.index(m)
+    cols = valid[-count:]
+    keep = clusters.keep[:, column]
+    return cols[keep] if keep.any() else cols
+
+
+def _fit_pnlss(
+    assembler: CampaignAssembler,
+    levels: list[int],
+    result: IdentificationResult,
+    config: IdentificationConfig,
+    label: str,
+) -> PNLSSModel | None:
+    est, val = config.estimation_realization, config.validation_realization
+    cols = {lv: _kept_columns(assembler, result, lv, est) for lv in levels}
+    count = min(len(c) for c in cols.values())
+    if count < 1:
+        return None
+    u = np.stack([assembler.blocks[(lv, est)].u[:, cols[lv][-count:]] for lv in levels], axis=2)
+    y = np.stack([assembler.blocks[(lv, est)].y[:, cols[lv][-count:]] for lv in levels], axis=2)
+    lines = _excited_lines(assembler, levels[0], est)
+    data = PeriodicData(u, y, assembler.fs, lines)
+    u_val, y_val = [], []
+    for lv in levels:
+        vcols = _kept_columns(assembler, result, lv, val)
+        block = assembler.blocks[(lv, val)]
+        u_val.append(block.u[:, vcols].T.ravel())
+        y_val.append(block.y[:, vcols].T.ravel())
+    lin = result.linear_level1
+    assert lin is not None
+    validation = (np.concatenate(u_val), np.concatenate(y_val))
+    try:
+        start = _output_equation_start(data, lin, config, validation)
+        return fit_pnlss(
+            data,
+            lin,
+            degrees=config.degrees,
+            structure=config.structure,
+            max_iter=config.max_iter,
+            validation=validation,
+            initial_model=start,
+        )
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        result.warnings.append(f"PNLSS ({label}) failed: {exc}")
+        return None
+
+
+def _output_equation_start(
+    data: PeriodicData,
+    lin: LinearStateSpace,
+    config: IdentificationConfig,
+    validation: tuple[np.ndarray, np.ndarray],
+) -> PNLSSModel:
+    """A PNLSS start whose output equation already holds the static nonlinearity.
+
+    With E = 0 the states are those of the linear model, and y is linear in (C, D, F, offset):
+    one least-squares solve on the steady-state states of every training period gives them
+    (the usual PNLSS initialisation puts F = 0, Paduart et al. 2010 §4; here the lift curve's
+    curvature over several offsets is far from linear, and LM starts much closer this way).
+    """
+    from dataclasses import replace
+
+    from scipy.signal import dlsim
+
+    from .monomials import evaluate_monomials
+
+    base = fit_pnlss(
+        data, lin, degrees=config.degrees, structure=config.structure, max_iter=0,
+        validation=validation,
+    )  # fmt: skip
+    nx = base.nx
+    rows, targets = [], []
+    for m in range(data.M):
+        for p in range(data.P):
+            un = (data.u[:, p, m] - base.u_mean[0]) / base.u_scale[0]
+            twice = np.concatenate([un, un])[:, None]
+            _, _, x = dlsim((base.A, base.B, np.eye(nx), np.zeros((nx, 1)), 1.0), twice)
+            x = np.asarray(x)[data.N :]
+            z = np.column_stack([x, un])
+            eta = evaluate_monomials(z, base.exponents_output)
+            rows.append(np.column_stack([x, un, eta, np.ones(data.N)]))
+            targets.append((data.y[:, p, m] - base.y_mean[0]) / base.y_scale[0])
+    R, t = np.vstack(rows), np.concatenate(targets)
+    scale = np.maximum(np.sqrt(np.mean(R**2, axis=0)), 1e-12)
+    theta = np.linalg.lstsq(R / scale, t, rcond=None)[0] / scale
+    k = base.exponents_output.shape[0]
+    return replace(
+        base,
+        C=theta[:nx].reshape(1, nx),
+        D=theta[nx : nx + 1].reshape(1, 1),
+        F=theta[nx + 1 : nx + 1 + k].reshape(1, k),
+        y_mean=base.y_mean + base.y_scale * theta[-1],
+    )
+
+
+def _validate_on_sines(
+    assembler: CampaignAssembler, result: IdentificationResult, names: dict[int, str]
+) -> None:
+    for rec in sorted(assembler.sines.values(), key=lambda r: r.index):
+        if not rec.valid():
+            if np.any(rec.count_u) or np.any(rec.count_y):
+                result.warnings.append(
+                    f"sine {rec.frequency_hz:g} Hz at {rec.offset_deg:g}°: incomplete record, "
+                    "not used for validation"
+                )
+            continue
+        level = _nearest_level(result, rec)
+        if level is None:
+            continue
+        name = result.levels[level].name
+        f = round(rec.frequency_hz, 6)
+        own = result.levels[level]
+        y_mean, u_mean = float(np.mean(rec.y)), float(np.mean(rec.u))
+        preds: dict[str, np.ndarray] = {}
+        low = next(iter(sorted(result.levels.values(), key=lambda r: r.offset_deg)))
+        if own.bla is not None and own.linear is not None:
+            y_frf = predict_bla_sine(own.bla, rec.frequency_hz, rec.u, y_mean)
+            result.errors_all[("BLA FRF", name, f)] = relative_rms_error(rec.y, y_frf)
+            lin = own.linear.with_operating_point(u_mean, y_mean)
+            y_ss = _steady_state(lin, rec.u, rec.samples_per_period)
+            result.errors_all[("BLA SS", name, f)] = relative_rms_error(rec.y, y_ss)
+            preds["BLA SS (own level)"] = y_ss
+        if low.bla is not None and low.linear is not None:
+            y_frf1 = predict_bla_sine(low.bla, rec.frequency_hz, rec.u, y_mean)
+            result.errors_level1[("BLA FRF", name, f)] = relative_rms_error(rec.y, y_frf1)
+            lin1 = low.linear.with_operating_point(u_mean, y_mean)
+            y_ss1 = _steady_state(lin1, rec.u, rec.samples_per_period)
+            result.errors_level1[("BLA SS", name, f)] = relative_rms_error(rec.y, y_ss1)
+            preds["BLA SS (level 1)"] = y_ss1
+        for model, errors, key in (
+            (result.pnlss_all, result.errors_all, "PNLSS (all levels)"),
+            (result.pnlss_level1, result.errors_level1, "PNLSS (level 1)"),
+        ):
+            if model is None:
+                continue
+            y_hat = _steady_state(model, rec.u, rec.samples_per_period)
+            errors[("PNLSS", name, f)] = (
+                relative_rms_error(rec.y, y_hat) if np.all(np.isfinite(y_hat)) else float("inf")
+            )
+            preds[key] = y_hat
+        result.predictions.append(
+            {
+                "name": f"sine {name} {rec.frequency_hz:g} Hz",
+                "level": name,
+                "frequency_hz": rec.frequency_hz,
+                "alpha_deg": rec.u.tolist(),
+                "cl_measured": rec.y.tolist(),
+                **{f"cl_{k}": v.tolist() for k, v in preds.items()},
+            }
+        )
+
+
+def _nearest_level(result: IdentificationResult, rec: SineRecord) -> int | None:
+    if not result.levels:
+        return None
+    return min(result.levels.values(), key=lambda r: abs(r.offset_deg - rec.offset_deg)).level
+
+
+def write_report(
+    result: IdentificationResult,
+    assembler: CampaignAssembler,
+    out_dir: str | Path,
+    quasi_static: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict[str, Path]:
+    """Models (JSON), Table 1 (Markdown, CSV) and the figures of paper Figs. 5-9, as PNG."""
+    from . import report
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+    payload = result.to_json_dict()
+    path = out / "models.json"
+    path.write_text(json.dumps(payload, indent=1, allow_nan=True))
+    written["models"] = path
+    for key, (markdown, csv) in result.tables().items():
+        (out / f"table1_{key}.md").write_text(markdown)
+        (out / f"table1_{key}.csv").write_text(csv)
+        written[f"table1_{key}"] = out / f"table1_{key}.md"
+    for lv in result.levels.values():
+        tag = lv.name.replace(" ", "_")
+        if lv.bla is not None:
+            written[f"frf_{tag}"] = report.plot_frf(
+                lv.bla, out / f"frf_{tag}.png", f"BLA, {lv.name} level ({lv.offset_deg:g}°)"
+            )
+            written[f"spectrum_{tag}"] = report.plot_output_spectrum(
+                lv.bla, out / f"output_spectrum_{tag}.png", f"Output spectrum, {lv.name} level"
+            )
+        if lv.clusters is not None:
+            written[f"clusters_{tag}"] = report.plot_clusters(
+                lv.clusters.labels, out / f"clusters_{tag}.png", title=f"Clusters, {lv.name} level"
+            )
+    for pred in result.predictions:
+        tag = pred["name"].replace(" ", "_").replace(".", "p")
+        alpha = np.asarray(pred["alpha_deg"])
+        measured = np.asarray(pred["cl_measured"])
+        simulated = {
+            k[3:]: np.asarray(v)
+            for k, v in pred.items()
+            if k.startswith("cl_") and k != "cl_measured"
+        }
+        written[f"cl_alpha_{tag}"] = report.plot_cl_alpha(
+            alpha, measured, out / f"cl_alpha_{tag}.png", simulated, quasi_static, pred["name"]
+        )
+        t = np.arange(len(measured)) / result.fs
+        written[f"time_{tag}"] = report.plot_time_series(
+            t, measured, simulated, out / f"time_{tag}.png", title=pred["name"]
+        )
+    return written
