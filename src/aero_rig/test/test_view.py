@@ -1,0 +1,434 @@
+"""The Rerun view: logger on plain messages, bag replay to .rrd, and the node over DDS.
+
+Recordings are written to files only (never a viewer) and read back with
+``rerun.chunk.RrdReader`` (rerun 0.41; ``rerun.dataframe`` is gone), so the assertions are on
+what a viewer would load: entity paths, timeline stamps, values and the blueprint's views.
+"""
+
+import json
+import math
+import os
+import re
+import signal
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from pressure_scanner.tap_cloud import fill_cloud
+from pressure_scanner.taps import load_taps
+from pressure_scanner.wing_params import WingParams
+from rerun.chunk import RrdReader
+from rig_runtime.messages import new_message, serialize, set_stamp, typestore
+from rig_runtime.node import Node
+from rig_runtime.testing import Processes, graph_env, wait_for
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from aero_rig import view as rig_view
+
+T0 = 1_700_000_000_000_000_000  # ns
+FS = 200.0
+N = 200  # samples (1 s)
+NAN_CL_K = 57  # this coefficients sample is invalid (NaN)
+NAN_TAP_K = 20  # this taps sample has a missing tap (a logged one: 20 % 10 == 0)
+Q = WingParams().dynamic_pressure_pa
+CHORD = WingParams().chord_m
+TAPS = load_taps(None)
+
+
+def stamp(k: int) -> int:
+    return T0 + round(k * 1e9 / FS)
+
+
+def alpha_deg(k: int) -> float:
+    return 6.6 + 2.4 * math.sin(2 * math.pi * 1.0 * k / FS)
+
+
+def cp_true() -> np.ndarray:
+    """A made-up Cp per tap, distinct on each surface: upper −2(1−x/c), lower 0.5(1−x/c)."""
+    x = TAPS.x_c
+    return np.where(TAPS.side > 0, -2.0 * (1 - x), np.where(TAPS.side < 0, 0.5 * (1 - x), 1.0))
+
+
+def model_json(refit: int, predictions: list[str], k: int) -> str:
+    freq = [0.02, 0.06, 0.10, 0.14]
+    labels = [[0, 0], [1, 0], [0, 0]] if k == 2 else [[0, 0], [0, 0], [0, 0]]
+    g = np.array([6.0, 5.0 - 1j, 4.0 - 2j, 3.0 - 2j])
+    levels: dict[str, Any] = {
+        "0": {
+            "offset_deg": 6.6,
+            "bla": {
+                "freq_hz": freq,
+                "G_re": g.real.tolist(),
+                "G_im": g.imag.tolist(),
+                "var_noise": [1e-4, 1e-4, 2e-4, 1e-3],
+                "var_total": [1e-3] * 4,
+                "var_nl": [1e-3, 1e-2, -1e-4, None],  # not positive / missing: no bar
+            },
+            "clusters": {"labels": labels, "k": k, "dominant": 0},
+        },
+        "2": {"offset_deg": 19.9, "bla": {"freq_hz": freq[:2], "G_re": [1, 1], "G_im": [0, 0]}},
+    }
+    preds = [
+        {
+            "name": name,
+            "alpha_deg": [5.0, 6.0, 7.0, 8.0],
+            "cl_measured": [0.5, 0.6, 0.7, 0.8],
+            "cl_bla_ss": [0.5, 0.61, None, 0.8],
+            "cl_pnlss": [0.5, 0.6, 0.71, 0.8],
+        }
+        for name in predictions
+    ]
+    model = {
+        "refit": refit,
+        "stamp_ns": stamp(100 * refit),
+        "levels": levels,
+        "predictions": preds,
+        "table1": {"markdown": f"| model | 1 Hz |\n|---|---|\n| PNLSS | 0.0{refit} |"},
+    }
+    return json.dumps(model)
+
+
+def status_msg(k: int, message: str) -> Any:
+    msg = new_message("diagnostic_msgs/msg/DiagnosticArray")
+    set_stamp(msg.header.stamp, stamp(k))
+    msg.status = [
+        new_message(
+            "diagnostic_msgs/msg/DiagnosticStatus",
+            level=1,
+            name="identifier",
+            message=message,
+            values=[new_message("diagnostic_msgs/msg/KeyValue", key="periods", value="3")],
+        )
+    ]
+    return msg
+
+
+def messages() -> list[tuple[int, str, Any]]:
+    """(receive time ns, topic, message) of a 1 s run with events, two models and status."""
+    out: list[tuple[int, str, Any]] = []
+    xyz = TAPS.xyz_m(CHORD, 0.54)
+    for k in range(N):
+        t = stamp(k)
+        rad = math.radians(alpha_deg(k))
+        for topic in ("/pitch/command", "/pitch/state"):
+            msg = new_message("sensor_msgs/msg/JointState", name=["pitch"], position=[rad])
+            set_stamp(msg.header.stamp, t)
+            out.append((t, topic, msg))
+        pressures = Q * cp_true()
+        if k == NAN_TAP_K:
+            pressures[5] = np.nan
+        cloud = fill_cloud(new_message("sensor_msgs/msg/PointCloud2"), new_message, xyz, pressures)
+        set_stamp(cloud.header.stamp, t)
+        out.append((t + 1, "/pressure/taps", cloud))
+        coeff = new_message("geometry_msgs/msg/Vector3Stamped")
+        coeff.vector.x = math.nan if k == NAN_CL_K else 0.104 * alpha_deg(k)
+        set_stamp(coeff.header.stamp, t)
+        out.append((t + 2, "/wing/coefficients", coeff))
+    string = "std_msgs/msg/String"
+    for k, event in (
+        (0, {"event": "start", "kind": "multisine", "level": 0, "realization": 1, "period": 2}),
+        (N - 1, {"event": "end", "kind": "multisine", "level": 0, "realization": 1, "period": 2}),
+        (N - 1, {"event": "plan_end", "samples": N}),
+    ):
+        edge = {"start": "start_stamp_s", "end": "end_stamp_s"}
+        if event["event"] in edge:
+            event[edge[event["event"]]] = stamp(k) / 1e9
+        out.append((stamp(k), "/experiment/segment", new_message(string, data=json.dumps(event))))
+    first = model_json(1, ["sine level 0 1.0 Hz", "sine level 0 0.4 Hz"], 2)
+    second = model_json(2, ["sine level 0 1.0 Hz"], 1)  # one prediction, one cluster fewer
+    out.append((stamp(100), "/identification/model", new_message(string, data=first)))
+    out.append((stamp(199), "/identification/model", new_message(string, data=second)))
+    for k, text in ((50, "buffering"), (60, "buffering"), (70, "refit 1 done")):
+        out.append((stamp(k), "/identification/status", status_msg(k, text)))
+    out.sort(key=lambda item: item[0])
+    return out
+
+
+def write_bag(path: Path, storage: StoragePlugin) -> None:
+    with Writer(path, version=9, storage_plugin=storage) as writer:
+        connections: dict[str, Any] = {}
+        for t, topic, msg in messages():
+            if topic not in connections:
+                connections[topic] = writer.add_connection(
+                    topic, msg.__msgtype__, typestore=typestore()
+                )
+            writer.write(connections[topic], t, serialize(msg))
+
+
+# -- reading a recording back ----------------------------------------------------------------
+
+
+class Rrd:
+    """Rows per entity of an .rrd's recording (temporal and static), and its blueprint."""
+
+    def __init__(self, path: Path) -> None:
+        reader = RrdReader(path)
+        self.rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        self.static: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        for chunk in reader.stream().to_chunks():
+            batch = chunk.to_record_batch()
+            names = batch.schema.names
+            columns = {}
+            for name in names:
+                column = batch.column(name)
+                if pa.types.is_timestamp(column.type):
+                    column = column.cast(pa.int64())
+                columns[name] = column.to_pylist()
+            target = self.static if chunk.is_static else self.rows
+            for i in range(batch.num_rows):
+                target[chunk.entity_path].append({n: columns[n][i] for n in names})
+        for rows in self.rows.values():
+            rows.sort(key=lambda r: (r.get(rig_view.TIMELINE) or 0, r["rerun.controls.RowId"]))
+        self.view_names: set[str] = set()
+        for bp in reader.blueprints():
+            for chunk in reader.stream(store=bp).to_chunks():
+                batch = chunk.to_record_batch()
+                if "ViewBlueprint:display_name" in batch.schema.names:
+                    for value in batch.column("ViewBlueprint:display_name").to_pylist():
+                        self.view_names.update(value or [])
+
+    def column(self, entity: str, name: str) -> list[Any]:
+        return [row[name] for row in self.rows[entity] if row.get(name) is not None]
+
+    def scalars(self, entity: str) -> tuple[np.ndarray, np.ndarray]:
+        rows = [r for r in self.rows[entity] if r.get("Scalars:scalars") is not None]
+        times = np.array([r[rig_view.TIMELINE] for r in rows], dtype=np.int64)
+        return times, np.array([r["Scalars:scalars"][0] for r in rows])
+
+    def bars(self, entity: str, row: int = -1) -> tuple[np.ndarray, np.ndarray]:
+        rows = [r for r in self.rows[entity] if r.get("BarChart:values") is not None]
+        r = rows[row]
+        return (
+            np.array(r["BarChart:abscissa"][0]["buffer"]),
+            np.array(r["BarChart:values"][0]["buffer"]),
+        )
+
+
+EXPECTED_ENTITIES = {
+    "/series/pitch/command",
+    "/series/pitch/measured",
+    "/series/cl",
+    "/cp/upper",
+    "/cp/lower",
+    "/cp/taps",
+    "/cl_alpha/live",
+    "/frf/level_0/G_dB",
+    "/frf/level_0/noise_dB",
+    "/frf/level_0/nl_distortion_dB",
+    "/frf/level_2/G_dB",
+    "/clusters/level_0/cluster_0",
+    "/clusters/level_0/cluster_1",
+    "/cl_alpha/predictions/sine_level_0_1_0_hz/measured",
+    "/cl_alpha/predictions/sine_level_0_1_0_hz/bla_ss",
+    "/cl_alpha/predictions/sine_level_0_1_0_hz/pnlss",
+    "/cl_alpha/predictions/sine_level_0_0_4_hz/pnlss",
+    "/model/table1",
+    "/model/summary",
+    "/events/segment",
+    "/events/model",
+    "/events/status",
+}
+
+
+@pytest.mark.parametrize(
+    "storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3], ids=["mcap", "sqlite3"]
+)
+def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StoragePlugin) -> None:
+    bag = tmp_path / "run"
+    write_bag(bag, storage)
+    out = rig_view.view_bag(bag)
+    assert out == tmp_path / "run.rrd" and out.stat().st_size > 0
+    rrd = Rrd(out)
+    assert EXPECTED_ENTITIES <= set(rrd.rows), EXPECTED_ENTITIES - set(rrd.rows)
+    assert {"/cp/axes", "/cl_alpha/axes"} <= set(rrd.static)
+
+    # Pitch in degrees at the message stamps, every sample.
+    stamps = np.array([stamp(k) for k in range(N)])
+    degs = np.array([alpha_deg(k) for k in range(N)])
+    for entity in ("/series/pitch/command", "/series/pitch/measured"):
+        times, values = rrd.scalars(entity)
+        np.testing.assert_array_equal(times, stamps)
+        np.testing.assert_allclose(values, degs, rtol=0, atol=1e-9)
+    # The NaN C_l sample is a gap, not a value.
+    times, values = rrd.scalars("/series/cl")
+    np.testing.assert_array_equal(times, np.delete(stamps, NAN_CL_K))
+    np.testing.assert_allclose(values, 0.104 * np.delete(degs, NAN_CL_K), atol=1e-12)
+
+    # Cp every 10th sample: x = 4·x/c, y = Cp (−Cp up), each surface from the leading edge.
+    strips = rrd.column("/cp/upper", "LineStrips2D:strips")
+    assert len(strips) == N // 10
+    cp = cp_true()
+    upper = np.flatnonzero(TAPS.side >= 0)
+    upper = upper[np.argsort(TAPS.x_c[upper])]
+    first = np.array(strips[0][0])
+    assert len(strips[0]) == 1 and first.shape == (25, 2)
+    np.testing.assert_allclose(first[:, 0], rig_view.CP_X_SCALE * TAPS.x_c[upper], atol=1e-5)
+    np.testing.assert_allclose(first[:, 1], cp[upper], atol=1e-5)
+    lower = np.array(rrd.column("/cp/lower", "LineStrips2D:strips")[0][0])
+    assert lower.shape == (25, 2) and np.all(lower[1:, 1] > 0)  # lower surface: Cp > 0 here
+    # The sample with a missing tap: its point is left out, not drawn at a made-up value.
+    taps_rows = rrd.rows["/cp/taps"]
+    counts = {r[rig_view.TIMELINE]: len(r["Points2D:positions"]) for r in taps_rows}
+    assert counts[stamp(NAN_TAP_K)] == 48 and counts[stamp(0)] == 49
+
+    # FRF of the latest model: |G| dB at the lines, variances in dB beside them.
+    f, gdb = rrd.bars("/frf/level_0/G_dB")
+    g = np.array([6.0, 5.0 - 1j, 4.0 - 2j, 3.0 - 2j])
+    np.testing.assert_allclose(f, [0.02, 0.06, 0.10, 0.14])
+    np.testing.assert_allclose(gdb, 20 * np.log10(np.abs(g)))
+    f, ndb = rrd.bars("/frf/level_0/noise_dB")
+    np.testing.assert_allclose(f, np.array([0.02, 0.06, 0.10, 0.14]) - 0.01)
+    np.testing.assert_allclose(ndb, 10 * np.log10([1e-4, 1e-4, 2e-4, 1e-3]))
+    f, nldb = rrd.bars("/frf/level_0/nl_distortion_dB")
+    np.testing.assert_allclose(f, [0.03, 0.07])
+    np.testing.assert_allclose(nldb, [-30.0, -20.0])
+    # Clusters: periods in time order (realization 0: 1..3, realization 1: 4..6).
+    first_model = stamp(100)
+    x0, h0 = rrd.bars("/clusters/level_0/cluster_0", 0)
+    x1, h1 = rrd.bars("/clusters/level_0/cluster_1", 0)
+    np.testing.assert_array_equal(x0, [1, 3, 4, 5, 6])
+    np.testing.assert_array_equal(x1, [2])
+    assert np.all(h0 == 1.0) and np.all(h1 == 0.6)  # dominant cluster is taller
+    # The models' C_l–α predictions: (α, −10·C_l), the missing BLA value breaks the line.
+    pred = "/cl_alpha/predictions/sine_level_0_1_0_hz"
+    measured = np.array(rrd.column(f"{pred}/measured", "LineStrips2D:strips")[0][0])
+    np.testing.assert_allclose(measured, [[5, -5], [6, -6], [7, -7], [8, -8]], atol=1e-5)
+    assert len(rrd.column(f"{pred}/bla_ss", "LineStrips2D:strips")[0]) == 1  # 2 points kept
+    # The second model dropped a prediction and a cluster: both are cleared at its stamp.
+    second_model = stamp(200)
+    for entity in (
+        "/cl_alpha/predictions/sine_level_0_0_4_hz/pnlss",
+        "/clusters/level_0/cluster_1",
+    ):
+        cleared = [r for r in rrd.rows[entity] if r.get("Clear:is_recursive") is not None]
+        assert [r[rig_view.TIMELINE] for r in cleared] == [second_model], entity
+    assert rrd.rows["/frf/level_0/G_dB"][0][rig_view.TIMELINE] == first_model
+    table = rrd.column("/model/table1", "TextDocument:text")
+    assert [t[0] for t in table] == [
+        "| model | 1 Hz |\n|---|---|\n| PNLSS | 0.01 |",
+        "| model | 1 Hz |\n|---|---|\n| PNLSS | 0.02 |",
+    ]
+
+    # Events: segment edges at their own stamps, status only when it changes.
+    segs = rrd.rows["/events/segment"]
+    texts = [r["TextLog:text"][0] for r in segs]
+    assert texts[0] == "start multisine level 0 realization 1 period 2"
+    assert texts[1].startswith("end multisine") and texts[2].startswith("plan_end")
+    assert segs[0][rig_view.TIMELINE] == stamp(0)
+    status = [r["TextLog:text"][0] for r in rrd.rows["/events/status"]]
+    assert status == [
+        "identifier: buffering (periods=3)",
+        "identifier: refit 1 done (periods=3)",
+    ]
+    assert rrd.column("/events/status", "TextLog:level")[0] == ["WARN"]
+
+    # The blueprint got one FRF and one cluster tab per level once the model named them.
+    assert {"Pitch [deg]", "C_l", "FRF level 0 [dB]", "FRF level 2 [dB]"} <= rrd.view_names
+    assert "Clusters level 0" in rrd.view_names
+
+
+def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> None:
+    rec, where = rig_view.open_recording("test_view", "save", tmp_path / "early.rrd")
+    assert "early.rrd" in where
+    logger = rig_view.RigViewLogger(rec)
+    string = "std_msgs/msg/String"
+    logger.on_model(new_message(string, data=json.dumps({"refit": 0})))
+    logger.on_model(new_message(string, data=json.dumps({"refit": 1, "levels": {"1": {}}})))
+    for bad in ("not json", "[1, 2]"):
+        with pytest.raises(ValueError, match="identification/model"):
+            logger.on_model(new_message(string, data=bad))
+    with pytest.raises(ValueError, match="segment"):
+        logger.on_segment(new_message(string, data="{"))
+    rig_view.close_recording(rec)
+    rrd = Rrd(tmp_path / "early.rrd")
+    summaries = [t[0] for t in rrd.column("/model/summary", "TextDocument:text")]
+    assert summaries[0].startswith("# Model refit 0") and "- level 1" in summaries[1]
+    assert "/frf/level_1/G_dB" not in rrd.rows
+    assert "FRF level 1 [dB]" in rrd.view_names
+
+
+def test_node_rejects_save_without_path_and_rclpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    env = graph_env()
+    for key in ("ROS_DOMAIN_ID", "RIG_DDS_NETWORK"):
+        monkeypatch.setenv(key, env[key])
+    monkeypatch.delenv("RIG_RUNTIME_BACKEND", raising=False)
+    assert rig_view.main(["--ros-args", "-p", "mode:=save"]) == 2
+    assert "RIG_RUNTIME_BACKEND" not in os.environ  # restored after the run
+    assert rig_view.main(["--ros-args", "-p", "mode:=movie"]) == 2
+    monkeypatch.setenv("RIG_RUNTIME_BACKEND", "rclpy")
+    assert rig_view.main(["--ros-args", "-p", "mode:=none"]) == 2
+
+
+def test_view_node_records_what_it_receives_over_dds(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    env = graph_env()
+    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
+        monkeypatch.setenv(key, env[key])
+    rrd_path = tmp_path / "live" / "view.rrd"
+    topics = {
+        "/pitch/command": ("sensor_msgs/msg/JointState", "stream"),
+        "/pitch/state": ("sensor_msgs/msg/JointState", "stream"),
+        "/pressure/taps": ("sensor_msgs/msg/PointCloud2", "stream"),
+        "/wing/coefficients": ("geometry_msgs/msg/Vector3Stamped", "stream"),
+        "/experiment/segment": ("std_msgs/msg/String", "events"),
+        "/identification/model": ("std_msgs/msg/String", "latched"),
+        "/identification/status": ("diagnostic_msgs/msg/DiagnosticArray", "latched"),
+    }
+    node = Node("test_view_publisher", argv=[], backend="dds")
+    try:
+        pubs = {t: node.create_publisher(ty, t, qos) for t, (ty, qos) in topics.items()}
+        # Published before the view exists: the latched model must still reach it.
+        model = next(m for _, t, m in messages() if t == "/identification/model")
+        pubs["/identification/model"].publish(model)
+        with Processes(env, log_dir=tmp_path) as procs:
+            view = procs.start_python(
+                "-m aero_rig.view",
+                "--ros-args",
+                "-p",
+                "mode:=save",
+                "-p",
+                f"rrd_path:={rrd_path}",
+                "-p",
+                "stats_period_s:=0.2",
+                name="view",
+            )
+            matched = node.spin_until(
+                lambda: all(p.subscription_count() > 0 for p in pubs.values()), 20
+            )
+            assert matched, procs.log("view")
+            streamed = [(t, m) for _, t, m in messages() if t not in ("/identification/model",)]
+            for i, (topic, msg) in enumerate(streamed):
+                pubs[topic].publish(msg)
+                if i % 20 == 19:
+                    node.spin_once(0.005)  # pace the burst: best-effort readers on loopback
+
+            # Status is latched (keep-last 1 on the writer): only the latest is guaranteed.
+            expected = f"command={N} state={N} taps={N} coefficients={N} segment=3 model=1"
+
+            def counted() -> bool:
+                lines = re.findall(r"received (.*) errors=0", procs.log("view"))
+                return (
+                    bool(lines) and lines[-1].startswith(expected) and "status=0" not in lines[-1]
+                )
+
+            assert wait_for(counted, 15), procs.log("view")
+            os.kill(view.pid, signal.SIGINT)
+            assert view.wait(timeout=15) == 0, procs.log("view")
+    finally:
+        node.close()
+
+    rrd = Rrd(rrd_path)
+    assert EXPECTED_ENTITIES <= set(rrd.rows), EXPECTED_ENTITIES - set(rrd.rows)
+    times, values = rrd.scalars("/series/pitch/measured")
+    np.testing.assert_array_equal(times, [stamp(k) for k in range(N)])
+    np.testing.assert_allclose(values, [alpha_deg(k) for k in range(N)], atol=1e-9)
+    assert len(rrd.column("/cp/upper", "LineStrips2D:strips")) == N // 10
+    f, _ = rrd.bars("/frf/level_0/G_dB")
+    np.testing.assert_allclose(f, [0.02, 0.06, 0.10, 0.14])
+    status = rrd.column("/events/status", "TextLog:text")
+    assert status[-1] == ["identifier: refit 1 done (periods=3)"]
+    assert "FRF level 2 [dB]" in rrd.view_names
