@@ -24,7 +24,7 @@ from typing import Any
 from rig_runtime.graph import GraphError, GraphSpec, NodeSpec, load_graph, package_share
 from rig_runtime.launcher import Launcher
 
-VIEW_MODES = ("spawn", "save", "serve", "off")
+VIEW_MODES = ("spawn", "save", "serve", "off")  # "off": no view node (the node calls it "none")
 
 
 def _config(name: str) -> Path:

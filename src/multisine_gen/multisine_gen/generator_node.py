@@ -32,8 +32,14 @@ PARAMETERS = [
         max=1000.0,
     ),
     Parameter("flow_control", True, "wait for /wing/coefficients (simulation); false on the rig"),
-    Parameter("max_lead_samples", 400, "most samples ahead of the last coefficients", min=1),
+    Parameter("max_lead_samples", 1000, "most samples ahead of the last coefficients", min=1),
     Parameter("wait_for_subscribers", 1, "command subscribers to wait for before t0", min=0),
+    Parameter(
+        "start_delay_s",
+        1.0,
+        "after the subscribers appear, let the rest of the graph finish discovery [s]",
+        min=0.0,
+    ),
     Parameter("start_timeout_s", 60.0, "give up waiting for the graph after this long", min=0.1),
     Parameter("exit_at_end", False, "exit after the plan (else keep the plan latched)"),
     Parameter("min_deg", -10.0, "actuator lower limit the plan is checked against [deg]"),
@@ -83,6 +89,7 @@ class Generator:
         self.wall0 = 0.0
         self.finished = False
         self.created = time.monotonic()
+        self.subscribed_at: float | None = None
         if p["flow_control"]:
             node.create_subscription(
                 "geometry_msgs/msg/Vector3Stamped",
@@ -122,6 +129,10 @@ class Generator:
                     p["start_timeout_s"],
                 )
                 self.node.request_shutdown(1)
+            return False
+        if self.subscribed_at is None:
+            self.subscribed_at = time.monotonic()
+        if time.monotonic() - self.subscribed_at < p["start_delay_s"]:
             return False
         self.t0_ns = time.time_ns()
         self.wall0 = time.monotonic()

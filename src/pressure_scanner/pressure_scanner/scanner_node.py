@@ -17,7 +17,7 @@ from rig_runtime import Node, Parameter, run_node, set_stamp
 
 from .scanner_client import ScannerClient, ScannerClientConfig, TapPressures
 from .scanner_protocol import ChannelMap
-from .tap_cloud import fill_cloud
+from .tap_cloud import fill_cloud, point_fields
 from .taps import load_taps
 from .wing_params import WingParams
 
@@ -56,6 +56,7 @@ class Scanner:
                 source_host=p["source_host"] or None,
             )
         )
+        self.fields = point_fields(node.new_message)
         self.pub = node.create_publisher(
             "sensor_msgs/msg/PointCloud2", "/pressure/taps", p["taps_qos"]
         )
@@ -92,7 +93,7 @@ class Scanner:
         cloud = self.node.new_message("sensor_msgs/msg/PointCloud2")
         set_stamp(cloud.header.stamp, frame.stamp_ns)
         cloud.header.frame_id = "wing"
-        fill_cloud(cloud, self.node.new_message, self.tap_xyz, frame.pressures_pa)
+        fill_cloud(cloud, self.node.new_message, self.tap_xyz, frame.pressures_pa, self.fields)
         self.pub.publish(cloud)
         self.published += 1
 

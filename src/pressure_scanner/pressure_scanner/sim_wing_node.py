@@ -13,7 +13,7 @@ from typing import Any
 from rig_runtime import Node, Parameter, run_node
 
 from .plant import WingPlant
-from .tap_cloud import fill_cloud
+from .tap_cloud import fill_cloud, point_fields
 from .taps import load_taps
 from .wing_params import WingParams
 
@@ -41,6 +41,7 @@ class SimWing:
         self.node = node
         taps = load_taps(p["taps_file"] or None)
         self.plant = WingPlant(WingParams(), taps, seed=p["seed"])
+        self.fields = point_fields(node.new_message)
         self.pub = node.create_publisher(
             "sensor_msgs/msg/PointCloud2", "/pressure/taps", p["taps_qos"]
         )
@@ -66,7 +67,7 @@ class SimWing:
         cloud = self.node.new_message("sensor_msgs/msg/PointCloud2")
         cloud.header.stamp = msg.header.stamp
         cloud.header.frame_id = "wing"
-        fill_cloud(cloud, self.node.new_message, self.plant.tap_xyz, pressures)
+        fill_cloud(cloud, self.node.new_message, self.plant.tap_xyz, pressures, self.fields)
         self.pub.publish(cloud)
 
 

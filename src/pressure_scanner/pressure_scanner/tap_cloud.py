@@ -14,7 +14,23 @@ POINT_STEP = 16
 FLOAT32 = 7  # sensor_msgs/PointField.FLOAT32
 
 
-def fill_cloud(msg: Any, new_message: Any, tap_xyz: np.ndarray, pressures_pa: np.ndarray) -> Any:
+def point_fields(new_message: Any) -> list[Any]:
+    """The four PointField descriptions of a tap cloud (build once, reuse per message)."""
+    return [
+        new_message(
+            "sensor_msgs/msg/PointField", name=name, offset=4 * i, datatype=FLOAT32, count=1
+        )
+        for i, name in enumerate(FIELDS)
+    ]
+
+
+def fill_cloud(
+    msg: Any,
+    new_message: Any,
+    tap_xyz: np.ndarray,
+    pressures_pa: np.ndarray,
+    fields: list[Any] | None = None,
+) -> Any:
     """Fill a PointCloud2 message in place from (n, 3) positions and (n,) pressures."""
     n = len(pressures_pa)
     points = np.empty((n, 4), dtype=np.float32)
@@ -22,12 +38,7 @@ def fill_cloud(msg: Any, new_message: Any, tap_xyz: np.ndarray, pressures_pa: np
     points[:, 3] = pressures_pa
     msg.height = 1
     msg.width = n
-    msg.fields = [
-        new_message(
-            "sensor_msgs/msg/PointField", name=name, offset=4 * i, datatype=FLOAT32, count=1
-        )
-        for i, name in enumerate(FIELDS)
-    ]
+    msg.fields = fields if fields is not None else point_fields(new_message)
     msg.is_bigendian = False
     msg.point_step = POINT_STEP
     msg.row_step = POINT_STEP * n

@@ -1,0 +1,178 @@
+"""Graph benchmark: the short plan through the simulated process graph (Cyclone DDS).
+
+Phase 1 (throughput): the whole campaign graph (generator, sim actuator, sim wing, lift,
+identifier, recorder) runs the short plan as fast as it can (real_time_factor 0); prints the
+real-time factor, samples lost (commands without a coefficients sample, from the bag), the
+identifier's refit times, and CPU time and peak memory per node.
+Phase 2 (latency): the graph at real-time pace for ``--latency-seconds``; an observer in this
+process timestamps the arrival of each /pitch/command sample and of its /wing/coefficients
+sample (same stamp): end-to-end latency p50/p99.
+
+    .venv/bin/python bench/graph.py [--plan short] [--latency-seconds 20]
+
+Last line: JSON with real_time_factor, wall_s, samples, samples_lost, latency_p50_ms,
+latency_p99_ms, refit_s (list), max_refit_s, node_cpu_s, node_peak_mb.
+"""
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import psutil
+from aero_rig.cli import CampaignMonitor, _config
+from rig_runtime.graph import load_graph
+from rig_runtime.launcher import Launcher
+from rig_runtime.messages import stamp_to_ns
+from rig_runtime.testing import graph_env, unique_domain_id
+from rosbags.highlevel import AnyReader
+
+
+def _sample_processes(launcher: Launcher, peaks: dict[str, float], cpu: dict[str, float]) -> None:
+    for proc in launcher.processes:
+        try:
+            p = psutil.Process(proc.process.pid)
+            mem = p.memory_info().rss
+            times = p.cpu_times()
+            total = times.user + times.system
+            for child in p.children(recursive=True):  # the identifier's worker process
+                mem += child.memory_info().rss
+                ct = child.cpu_times()
+                total += ct.user + ct.system
+        except psutil.Error:
+            continue
+        peaks[proc.spec.name] = max(peaks.get(proc.spec.name, 0.0), mem / 2**20)
+        cpu[proc.spec.name] = max(cpu.get(proc.spec.name, 0.0), total)
+
+
+def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
+    graph = load_graph(_config("sim.yaml"))
+    overrides = {
+        "generator": {"plan": plan, "real_time_factor": 0.0},
+        "recorder": {"output": str(run_dir / "bag")},
+        "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
+    }
+    launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs")
+    monitor = CampaignMonitor()
+    peaks: dict[str, float] = {}
+    cpu: dict[str, float] = {}
+    t0 = time.monotonic()
+    launcher.start()
+    t_first = None
+    try:
+        while launcher.poll() is None:
+            monitor.spin(0.25)
+            if t_first is None and monitor.k > 0:
+                t_first = time.monotonic()
+            _sample_processes(launcher, peaks, cpu)
+            if time.monotonic() - t0 > 1800:
+                raise RuntimeError("graph did not finish within 30 minutes")
+    finally:
+        monitor.close()
+        launcher.stop()
+    wall = time.monotonic() - t0
+    with AnyReader([run_dir / "bag"]) as reader:
+        stamps: dict[str, set[int]] = {"/pitch/command": set(), "/wing/coefficients": set()}
+        conns = [c for c in reader.connections if c.topic in stamps]
+        for conn, _, raw in reader.messages(connections=conns):
+            stamps[conn.topic].add(stamp_to_ns(reader.deserialize(raw, conn.msgtype).header.stamp))
+    models = json.loads((run_dir / "models.json").read_text())
+    status_refits = []
+    log = (run_dir / "logs" / "identifier.log").read_text(errors="replace")
+    for line in log.splitlines():
+        if "done in" in line and "refit" in line:
+            status_refits.append(float(line.split("done in")[1].split("s")[0]))
+    experiment_s = monitor.total / 200.0
+    return {
+        "wall_s": round(wall, 2),
+        "experiment_s": experiment_s,
+        "real_time_factor": round(experiment_s / wall, 2),
+        "samples": len(stamps["/pitch/command"]),
+        "samples_lost": len(stamps["/pitch/command"] - stamps["/wing/coefficients"]),
+        "refit_s": status_refits,
+        "max_refit_s": max(status_refits) if status_refits else None,
+        "node_cpu_s": {k: round(v, 1) for k, v in cpu.items()},
+        "node_peak_mb": {k: round(v, 1) for k, v in peaks.items()},
+        "table1_all_levels": models["table1"]["markdown"],
+    }
+
+
+def latency(seconds: float, run_dir: Path) -> dict[str, Any]:
+    from rig_runtime.node import Node
+
+    graph = load_graph(_config("sim.yaml"))
+    keep = {"generator", "sim_actuator", "sim_wing", "lift"}
+    graph = type(graph)(graph.name, tuple(n for n in graph.nodes if n.name in keep), graph.source)
+    overrides = {"generator": {"plan": "short", "real_time_factor": 1.0}}
+    node = Node("bench_latency", argv=[], backend="dds")
+    sent: dict[int, int] = {}
+    delays: list[float] = []
+
+    def on_command(msg: Any) -> None:
+        sent[stamp_to_ns(msg.header.stamp)] = time.perf_counter_ns()
+
+    def on_coefficients(msg: Any) -> None:
+        t = sent.pop(stamp_to_ns(msg.header.stamp), None)
+        if t is not None:
+            delays.append((time.perf_counter_ns() - t) / 1e6)
+
+    node.create_subscription("sensor_msgs/msg/JointState", "/pitch/command", on_command, "stream")
+    node.create_subscription(
+        "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", on_coefficients, "stream"
+    )
+    launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "latency_logs")
+    launcher.start()
+    try:
+        node.spin_until(lambda: len(delays) > 0, 60)
+        node.spin_until(lambda: launcher.poll() is not None, seconds)
+    finally:
+        launcher.stop()
+        node.close()
+    d = np.array(delays) if delays else np.array([np.nan])
+    return {
+        "latency_samples": len(delays),
+        "latency_p50_ms": round(float(np.percentile(d, 50)), 3),
+        "latency_p99_ms": round(float(np.percentile(d, 99)), 3),
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--plan", default="short", help="plan for the throughput phase")
+    parser.add_argument("--latency-seconds", type=float, default=20.0)
+    parser.add_argument("--keep", default=None, help="keep the run directory here")
+    args = parser.parse_args()
+    import os
+
+    env = graph_env(unique_domain_id())
+    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
+        os.environ[key] = env[key]
+    with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
+        run_dir = Path(args.keep or tmp)
+        figures = throughput(args.plan, run_dir / "run")
+        table = figures.pop("table1_all_levels")
+        figures.update(latency(args.latency_seconds, run_dir))
+    print(table)
+    print(
+        f"throughput: {figures['experiment_s']} s of experiment in {figures['wall_s']} s "
+        f"= {figures['real_time_factor']}x real time, {figures['samples_lost']} of "
+        f"{figures['samples']} samples lost"
+    )
+    print(f"refits: {figures['refit_s']} s")
+    print(f"cpu per node [s]: {figures['node_cpu_s']}")
+    print(f"peak memory per node [MB]: {figures['node_peak_mb']}")
+    print(
+        f"latency /pitch/command -> /wing/coefficients at real time: p50 "
+        f"{figures['latency_p50_ms']} ms, p99 {figures['latency_p99_ms']} ms "
+        f"({figures['latency_samples']} samples)"
+    )
+    print(json.dumps(figures))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
