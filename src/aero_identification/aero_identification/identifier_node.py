@@ -38,6 +38,12 @@ PARAMETERS = [
     Parameter("use_worker", True, "refit in a worker process (false: inline, for debugging)"),
     Parameter("exit_after_final", True, "exit once the final identification is published"),
     Parameter("max_early_samples", 20000, "samples kept while waiting for the plan", min=0),
+    Parameter(
+        "input_qos",
+        "stream",
+        "QoS of /pitch/state and /wing/coefficients (sensor on the rig: best effort)",
+        choices=("stream", "sensor", "default"),
+    ),
 ]
 
 
@@ -98,7 +104,11 @@ class Identifier:
             "sensor_msgs/msg/JointState", "/pitch/state", self.on_state, "stream"
         )
         node.create_subscription(
-            "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", self.on_coefficients, "stream"
+            "geometry_msgs/msg/Vector3Stamped",
+            "/wing/coefficients",
+            self.on_coefficients,
+            p["input_qos"],
+            depth=None if p["input_qos"] == "stream" else 2000,
         )
         node.create_subscription(
             "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events"

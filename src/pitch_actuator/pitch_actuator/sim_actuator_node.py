@@ -5,10 +5,11 @@ Reactive: every ``/pitch/command`` sample k yields one ``/pitch/state`` sample k
 stamp, so a simulated run is deterministic for a seed whatever the speed. The state carries the
 joint ``pitch`` (logged position: noise, quantisation; velocity) and, as simulation ground
 truth, the joint ``alpha_true`` (true pitch + free-stream gust), which only the simulated wing
-reads. Experiment time advances with the commands, so pauses of a slow graph are harmless;
-if commands stop for ``stream_timeout_s`` of wall time (the generator is gone) the node keeps
-stepping the model in real time: after ``watchdog_timeout_s`` more the governor holds, then
-ramps to the safe angle, as the rig would.
+reads. Experiment time advances with the commands, so pauses of a slow graph are harmless.
+The command stream counts as lost when its publisher has left the graph (DDS matching) for
+``watchdog_timeout_s``, or when no command came for ``stream_timeout_s`` of wall time even
+though a publisher is still there (a hung generator); then the node keeps stepping the model in
+real time: the governor holds, then ramps to the safe angle, as the rig would.
 ``/pitch/stop`` (std_msgs/Bool): true = stop (hold, then safe angle), false = resume.
 """
 
@@ -37,8 +38,9 @@ PARAMETERS = [
     Parameter("gust_time_constant_s", 0.1, "gust correlation time [s]", min=1e-3),
     Parameter(
         "stream_timeout_s",
-        5.0,
-        "wall time without commands after which the simulation runs on in real time [s]",
+        30.0,
+        "wall time without commands, publisher still present, after which the simulation runs "
+        "on in real time [s]",
         min=0.01,
     ),
     Parameter(
@@ -120,6 +122,9 @@ class SimActuator:
             return
         silent = time.monotonic() - self.last_command_wall
         timeout = self.node.params["stream_timeout_s"]
+        publisher_count = getattr(self.command_sub, "publisher_count", None)
+        if publisher_count is not None and publisher_count() == 0:
+            timeout = min(timeout, self.limits.watchdog_timeout_s)  # the generator is gone
         if self.governor.stopped:
             timeout = min(timeout, 2.0 / self.fs)  # a stop request needs no stream to act
         if silent < timeout:

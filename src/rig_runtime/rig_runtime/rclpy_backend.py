@@ -112,7 +112,24 @@ class RclpyBackend:
         return int(self.node.get_clock().now().nanoseconds)
 
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
-        return {name: (types[0], None) for name, types in self.node.get_topic_names_and_types()}
+        """Topics with their type and the QoS offered by their first publisher."""
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
+
+        result: dict[str, tuple[str, QosProfile | None]] = {}
+        for name, types in self.node.get_topic_names_and_types():
+            profile = None
+            for info in self.node.get_publishers_info_by_topic(name):
+                q = info.qos_profile
+                profile = QosProfile(
+                    "best_effort" if q.reliability == ReliabilityPolicy.BEST_EFFORT else "reliable",
+                    "transient_local"
+                    if q.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                    else "volatile",
+                    0 if q.history == HistoryPolicy.KEEP_ALL else int(q.depth),
+                )
+                break
+            result[name] = (types[0], profile)
+        return result
 
     def close(self) -> None:
         self._executor.remove_node(self.node)
