@@ -101,7 +101,11 @@ class Identifier:
         )
         node.create_subscription("std_msgs/msg/String", "/experiment/plan", self.on_plan, "latched")
         node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/state", self.on_state, "stream"
+            "sensor_msgs/msg/JointState",
+            "/pitch/state",
+            self.on_state,
+            p["input_qos"],
+            depth=None if p["input_qos"] == "stream" else 2000,
         )
         node.create_subscription(
             "geometry_msgs/msg/Vector3Stamped",

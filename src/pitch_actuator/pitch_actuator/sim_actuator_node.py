@@ -75,7 +75,7 @@ class SimActuator:
             "sensor_msgs/msg/JointState", "/pitch/state", p["state_qos"]
         )
         self.reporter = SafetyReporter(node, self.governor, "sim_actuator")
-        node.create_subscription(
+        self.command_sub = node.create_subscription(
             "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream"
         )
         node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
