@@ -129,6 +129,12 @@ class SimActuator:
             timeout = min(timeout, 2.0 / self.fs)  # a stop request needs no stream to act
         if silent < timeout:
             return
+        if self.self_steps == 0:
+            self.node.logger.warning(
+                "no command for %.2f s (publishers: %s): running on in real time",
+                silent,
+                publisher_count() if publisher_count is not None else "?",
+            )
         due = int((silent - timeout) * self.fs) + 1 - self.self_steps
         for _ in range(max(0, min(due, 50))):
             stamp_ns = self.last_stamp_ns + round(1e9 / self.fs)

@@ -38,7 +38,7 @@ PARAMETERS = [
     Parameter(
         "max_alpha_gap_s", 0.02, "largest stamp gap to interpolate the pitch over [s]", min=0.0
     ),
-    Parameter("max_pending", 400, "taps samples kept waiting for their pitch", min=1),
+    Parameter("max_pending", 5000, "taps samples kept waiting for their pitch", min=1),
     Parameter("diagnostics_period_s", 1.0, "period of /diagnostics status [s]", min=0.05),
     Parameter("qos", "stream", "QoS of inputs and output", choices=("stream", "sensor", "default")),
 ]

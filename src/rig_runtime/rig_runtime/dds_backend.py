@@ -171,22 +171,24 @@ class DdsSubscription:
         return len(self.reader.get_matched_publications())
 
     def drain(self) -> int:
-        """Take every available sample and deliver it; returns how many were delivered."""
+        """Take one batch of available samples and deliver them; returns how many.
+
+        One batch per subscription per spin keeps subscriptions fair: a busy topic cannot
+        starve another one whose samples a callback needs (e.g. the pitch a tap sample needs).
+        """
+        batch = ddspy_take(self.reader._ref, _ANY_STATE, _TAKE_BATCH)
+        if isinstance(batch, int):
+            raise DDSException(batch, f"taking from {self.topic}")
         delivered = 0
-        while True:
-            batch = ddspy_take(self.reader._ref, _ANY_STATE, _TAKE_BATCH)
-            if isinstance(batch, int):
-                raise DDSException(batch, f"taking from {self.topic}")
-            for data, info in batch:
-                if not info.valid_data:  # dispose/unregister notifications carry no sample
-                    continue
-                if self.raw:
-                    self.callback((data, time.time_ns()))
-                else:
-                    self.callback(deserialize(data, self.type_name))
-                delivered += 1
-            if len(batch) < _TAKE_BATCH:
-                return delivered
+        for data, info in batch:
+            if not info.valid_data:  # dispose/unregister notifications carry no sample
+                continue
+            if self.raw:
+                self.callback((data, time.time_ns()))
+            else:
+                self.callback(deserialize(data, self.type_name))
+            delivered += 1
+        return delivered
 
 
 @dataclass
@@ -274,8 +276,14 @@ class DdsBackend:
         if timeout_ns > 0:
             self._waitset.wait(timeout_ns)
         self._guard.set(False)
-        for sub in self._subscriptions:
-            sub.drain()
+        busy = True
+        while busy:  # round robin, one batch each, until every reader is empty
+            busy = False
+            for sub in self._subscriptions:
+                if sub.drain() >= _TAKE_BATCH:
+                    busy = True
+            if time.monotonic_ns() - now > 20_000_000:
+                break  # let due timers run
         now = time.monotonic_ns()
         for timer in list(self._timers):
             if not timer.cancelled and timer.next_ns <= now:
