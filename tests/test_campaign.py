@@ -218,7 +218,7 @@ def test_killing_the_identifier_stops_the_campaign_with_a_clear_error(tmp_path: 
         target = identifier()
         assert target is not None
         target.kill()
-        out, err = proc.communicate(timeout=120)
+        _, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)

@@ -173,14 +173,6 @@ def test_out_of_range_commands_are_clamped_and_reported(limit_run: Any) -> None:
     assert "clamped" in procs.log("sim_actuator")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "BUG: the setpoint stops at the limit at full rate (150°/s) and the ζ=0.7 position loop "
-        "overshoots by ~0.15° (35.155° / −10.16° measured): the governor must brake into the "
-        "limits (see report)"
-    ),
-)
 def test_state_never_leaves_the_limits(limit_run: Any) -> None:
     client, _ = limit_run
     _, pitch = client.series()

@@ -21,6 +21,13 @@ LIMIT_PARAMETERS = [
     Parameter("watchdog_timeout_s", 0.25, "no command this long trips the watchdog [s]", min=0.005),
     Parameter("hold_s", 1.0, "hold still this long after a trip or stop [s]", min=0.0),
     Parameter("ramp_rate_deg_s", 5.0, "rate of the ramp to the safe angle [deg/s]", min=0.01),
+    Parameter(
+        "limit_approach_s",
+        0.02,
+        "time constant of the exponential approach to a limit, against overshoot [s]",
+        min=0.0,
+        max=1.0,
+    ),
     Parameter("initial_deg", 0.0, "pitch at start-up [deg]"),
     Parameter("diagnostics_period_s", 1.0, "period of /diagnostics status [s]", min=0.05),
 ]
@@ -35,6 +42,7 @@ def limits_from_params(params: Any) -> ActuatorLimits:
         watchdog_timeout_s=params["watchdog_timeout_s"],
         hold_s=params["hold_s"],
         ramp_rate_deg_s=params["ramp_rate_deg_s"],
+        limit_approach_s=params["limit_approach_s"],
     )
 
 

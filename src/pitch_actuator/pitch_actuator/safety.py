@@ -61,6 +61,7 @@ class ActuatorLimits:
     watchdog_timeout_s: float = 0.25
     hold_s: float = 1.0
     ramp_rate_deg_s: float = 5.0
+    limit_approach_s: float = 0.02  # time constant of the approach to a limit (0 = off)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -84,6 +85,10 @@ class ActuatorLimits:
                 raise LimitsError(f"ActuatorLimits.{name} must be > 0, got {getattr(self, name)}")
         if self.hold_s < 0.0:
             raise LimitsError(f"ActuatorLimits.hold_s must be >= 0, got {self.hold_s}")
+        if self.limit_approach_s < 0.0:
+            raise LimitsError(
+                f"ActuatorLimits.limit_approach_s must be >= 0, got {self.limit_approach_s}"
+            )
         if self.ramp_rate_deg_s > self.max_rate_deg_s:
             raise LimitsError(
                 f"ActuatorLimits: ramp_rate_deg_s ({self.ramp_rate_deg_s}) must not exceed "
@@ -469,5 +474,16 @@ class SafetyGovernor:
         # However long the gap since the last call, one call moves by a bounded step.
         max_step = lim.max_rate_deg_s * min(elapsed, self.max_step_interval_s)
         setpoint = _move_toward(start_setpoint, setpoint, max_step)
+        # Approach a limit exponentially (time constant limit_approach_s): a rate-limited ramp
+        # that stops dead at the limit makes an underdamped position loop overshoot it
+        # (ζ = 0.7: ~0.15° at 150°/s); an exponential approach does not (DESIGN.md §8).
+        if lim.limit_approach_s > 0 and elapsed > 0:
+            keep = math.exp(-elapsed / lim.limit_approach_s)
+            if setpoint > start_setpoint:
+                room = max(lim.max_deg - start_setpoint, 0.0)
+                setpoint = min(setpoint, lim.max_deg - room * keep)
+            elif setpoint < start_setpoint:
+                room = max(start_setpoint - lim.min_deg, 0.0)
+                setpoint = max(setpoint, lim.min_deg + room * keep)
         self._setpoint = min(max(setpoint, lim.min_deg), lim.max_deg)
         return self._setpoint

@@ -21,6 +21,7 @@ LIMITS = ActuatorLimits(
     watchdog_timeout_s=0.1,
     hold_s=0.5,
     ramp_rate_deg_s=5.0,
+    limit_approach_s=0.0,  # plain clamping here; the approach has its own test below
 )
 FS = 200.0
 
@@ -179,3 +180,26 @@ def test_invalid_limits_are_refused_with_a_clear_message() -> None:
     with pytest.raises(LimitsError, match="unknown actuator limit parameter"):
         ActuatorLimits.from_mapping({"max_deg": 30.0, "max_speed": 3.0})
     assert ActuatorLimits.from_mapping(LIMITS.as_dict()) == LIMITS
+
+
+def test_limit_approach_keeps_the_loop_inside_the_limits() -> None:
+    """A full-rate ramp into a limit must not make the ζ = 0.7 position loop overshoot it."""
+    from pitch_actuator.dynamics import ActuatorModel, ActuatorParams
+
+    for approach, overshoots in ((0.0, True), (0.02, False)):
+        limits = ActuatorLimits(
+            max_deg=35.0, min_deg=-10.0, max_rate_deg_s=150.0, limit_approach_s=approach
+        )
+        gov = SafetyGovernor(limits, initial_deg=30.0)
+        model = ActuatorModel(
+            ActuatorParams(
+                initial_deg=30.0, noise_std_deg=0.0, encoder_step_deg=0.0, gust_std_deg=0.0
+            ),
+            fs=FS,
+        )
+        peak = max(
+            math.degrees(model.step(math.radians(gov.command(k / FS, 60.0))).true_position_rad)
+            for k in range(1, 200)
+        )
+        assert (peak > 35.01) is overshoots, (approach, peak)
+        assert peak > 34.99  # the limit is still reached
