@@ -89,8 +89,8 @@ class WingParams:
 
     vortex_lag_tu: float = 6.0
     vortex_travel_tu: float = 11.0
-    vortex_strength_mean: float = 1.0
-    vortex_strength_cv: float = 0.15
+    vortex_strength_mean: float = 1.7
+    vortex_strength_cv: float = 0.3
 
     separation_blend_width_c: float = 0.05
     base_pressure_min: float = -0.7
