@@ -113,9 +113,7 @@ def test_rrd_holds_logged_entities(campaign) -> None:
     assert rrd.exists() and rrd.stat().st_size > 10_000
     from rerun.chunk import RrdReader  # type: ignore[import-not-found]
 
-    paths = set()
-    for chunk in RrdReader(str(rrd)).chunks():  # type: ignore[attr-defined]
-        paths.add(str(chunk.entity_path))
+    paths = {str(chunk.entity_path) for chunk in RrdReader(rrd).stream().to_chunks()}
     assert any(p.startswith("/series/") for p in paths)
     assert any(p.startswith("/cp/") for p in paths)
     assert any(p.startswith("/frf/") for p in paths)

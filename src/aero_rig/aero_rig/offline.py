@@ -49,7 +49,15 @@ def read_campaign_bag(bag: str | Path) -> BagData:
         reader = AnyReader([path])
         reader.open()
     except Exception as exc:
-        raise BagError(f"cannot open bag {path}: {exc}") from exc
+        readable, damaged = _readable_view(path)
+        if readable is None:
+            raise BagError(f"cannot open bag {path}: {exc}") from exc
+        warnings.append(
+            f"bag {path} has damaged file(s) {damaged} ({exc}); fitting the data of the "
+            "readable files, i.e. up to the damage"
+        )
+        reader = AnyReader([readable])
+        reader.open()
     try:
         topics = {c.topic for c in reader.connections}
         missing = [t for t in REQUIRED_TOPICS if t not in topics]
@@ -85,6 +93,50 @@ def read_campaign_bag(bag: str | Path) -> BagData:
     finally:
         reader.close()
     return BagData(plan, assembler, count, warnings)
+
+
+def _readable_view(path: Path) -> tuple[Path | None, list[str]]:
+    """A copy of a rosbag2 directory's metadata listing only the files that open.
+
+    A recording cut short (power loss, kill -9 of a writer that does not split) leaves an MCAP
+    file without its footer, which rosbags refuses whole. The view links the good files into a
+    temporary directory beside a trimmed metadata.yaml; None if nothing is readable.
+    """
+    import tempfile
+
+    import yaml
+    from rosbags.rosbag2.storage_mcap import McapReader
+
+    meta_path = path / "metadata.yaml"
+    if not meta_path.exists():
+        return None, []
+    meta = yaml.safe_load(meta_path.read_text())
+    info = meta["rosbag2_bagfile_information"]
+    if info.get("storage_identifier") != "mcap":
+        return None, []
+    good, damaged = [], []
+    for name in info["relative_file_paths"]:
+        file = path / Path(name).name
+        probe = McapReader(file)
+        try:
+            probe.open()
+            probe.close()
+            good.append(name)
+        except Exception:
+            damaged.append(Path(name).name)
+    if not good or not damaged:
+        return None, damaged
+    view = Path(tempfile.mkdtemp(prefix="aero_rig_fit_")) / path.name
+    view.mkdir()
+    for name in good:
+        (view / Path(name).name).symlink_to((path / Path(name).name).resolve())
+    info["relative_file_paths"] = good
+    info["files"] = [f for f in info.get("files", []) if f["path"] in good]
+    info["message_count"] = sum(f["message_count"] for f in info["files"])
+    for topic in info.get("topics_with_message_count", []):
+        topic["message_count"] = 0  # unknown per file; the reader counts the messages itself
+    (view / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    return view, damaged
 
 
 def fit_bag(
