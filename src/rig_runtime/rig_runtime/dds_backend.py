@@ -74,7 +74,8 @@ def cyclone_config() -> str | None:
         "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
         f"<MaxAutoParticipantIndex>{max_index}</MaxAutoParticipantIndex>"
         '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
-        '<Internal><SocketReceiveBufferSize min="4MB"/></Internal>'
+        '<Internal><SocketReceiveBufferSize min="4MB"/><Watermarks><WhcHigh>4MB</WhcHigh>'
+        "<WhcHighInit>4MB</WhcHighInit><WhcAdaptive>false</WhcAdaptive></Watermarks></Internal>"
         "<Tracing><Verbosity>severe</Verbosity><OutputFile>stderr</OutputFile></Tracing>"
         "</Domain></CycloneDDS>"
     )

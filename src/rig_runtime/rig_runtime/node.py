@@ -22,6 +22,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 from .names import ArgumentError, RosArgs, normalize_namespace, parse_ros_args, resolve_name
@@ -289,7 +290,16 @@ def run_node(
         close = getattr(instance, "close", None)
         if callable(close):
             node.on_shutdown(close)
-        node.spin()
+        profile_dir = os.environ.get("RIG_PROFILE_DIR")
+        if profile_dir:  # cProfile of the spin loop, for `python -m pstats DIR/<node>.prof`
+            import cProfile
+
+            with cProfile.Profile() as profiler:
+                node.spin()
+            Path(profile_dir).mkdir(parents=True, exist_ok=True)
+            profiler.dump_stats(Path(profile_dir) / f"{node.name}.prof")
+        else:
+            node.spin()
     except Exception:
         node.logger.exception("node failed")
         node.exit_code = node.exit_code or 1
