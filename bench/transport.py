@@ -139,6 +139,8 @@ def main() -> int:
         "rtt_p99_ms": round(float(np.percentile(rtt, 99)), 3),
         "rtt_samples": len(rtts),
         "rtt_lost": pings_lost,
+        "rtt_p90_ms": round(float(np.percentile(rtt, 90)), 3),
+        "rtt_max_ms": round(float(np.max(rtt)), 3),
         "message_bytes": len(bytes(np.asarray(msgs[0].data))) + 100,
     }
     print(
