@@ -22,6 +22,8 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from rig_runtime.diagnostics import diagnostic_array
+
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 
 from .campaign import CampaignAssembler
@@ -281,21 +283,14 @@ class Identifier:
             values["warnings"] = "; ".join(warnings)
         level = 2 if self.errors else (1 if excluded or warnings else 0)
         message = values["state"]
-        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
-        msg.status = [
-            self.node.new_message(
-                "diagnostic_msgs/msg/DiagnosticStatus",
-                level=level,
-                name=f"{self.node.name}: identification",
-                message=message,
-                hardware_id="identifier",
-                values=[
-                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=v)
-                    for k, v in values.items()
-                ],
-            )
-        ]
+        msg = diagnostic_array(
+            self.node,
+            f"{self.node.name}: identification",
+            level,
+            message,
+            "identifier",
+            values,
+        )
         self.status_pub.publish(msg)
 
     def close(self) -> None:

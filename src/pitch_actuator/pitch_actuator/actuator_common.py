@@ -6,8 +6,9 @@ same way on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray).
 """
 
 import math
-import time
 from typing import Any
+
+from rig_runtime.diagnostics import diagnostic_array
 
 from rig_runtime import Node, Parameter
 
@@ -87,20 +88,12 @@ class SafetyReporter:
         status = self.governor.status()
         values = dict(status.values)
         values.update(self.extra)
-        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
-        stamp = time.time_ns()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-        msg.status = [
-            self.node.new_message(
-                "diagnostic_msgs/msg/DiagnosticStatus",
-                level=int(status.level),
-                name=f"{self.node.name}: pitch actuator safety",
-                message=status.message,
-                hardware_id=self.hardware_id,
-                values=[
-                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=str(v))
-                    for k, v in values.items()
-                ],
-            )
-        ]
+        msg = diagnostic_array(
+            self.node,
+            f"{self.node.name}: pitch actuator safety",
+            int(status.level),
+            status.message,
+            self.hardware_id,
+            values,
+        )
         self.pub.publish(msg)

@@ -12,11 +12,11 @@ and published as NaN, never as a number. Exclusions are counted on ``/diagnostic
 import bisect
 import math
 import sys
-import time
 from collections import deque
 from typing import Any
 
 import numpy as np
+from rig_runtime.diagnostics import diagnostic_array
 
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 
@@ -146,21 +146,14 @@ class Lift:
         values = {k: str(v) for k, v in self.counts.items()}
         values["excluded_taps"] = ", ".join(f"{k}: {v}" for k, v in excluded.items()) or "none"
         values["pending"] = str(len(self.pending))
-        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
-        msg.status = [
-            self.node.new_message(
-                "diagnostic_msgs/msg/DiagnosticStatus",
-                level=level,
-                name=f"{self.node.name}: pressure integration",
-                message=self.last_reason or "ok",
-                hardware_id="lift",
-                values=[
-                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=v)
-                    for k, v in values.items()
-                ],
-            )
-        ]
+        msg = diagnostic_array(
+            self.node,
+            f"{self.node.name}: pressure integration",
+            level,
+            self.last_reason or "ok",
+            "lift",
+            values,
+        )
         self.diag.publish(msg)
 
     def close(self) -> None:

@@ -10,8 +10,9 @@ the next ``tare_frames`` frames becomes the per-channel offset.
 """
 
 import sys
-import time
 from typing import Any
+
+from rig_runtime.diagnostics import diagnostic_array
 
 from rig_runtime import Node, Parameter, run_node, set_stamp
 
@@ -113,21 +114,14 @@ class Scanner:
             "tared": str(stats.tared),
         }
         level = 1 if lost or stats.invalid_frames or stats.missing_taps else 0
-        msg = self.node.new_message("diagnostic_msgs/msg/DiagnosticArray")
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
-        msg.status = [
-            self.node.new_message(
-                "diagnostic_msgs/msg/DiagnosticStatus",
-                level=level,
-                name=f"{self.node.name}: pressure scanner",
-                message=f"{lost} frames lost" if lost else "ok",
-                hardware_id=f"pwsc://udp:{self.client.port}",
-                values=[
-                    self.node.new_message("diagnostic_msgs/msg/KeyValue", key=k, value=v)
-                    for k, v in values.items()
-                ],
-            )
-        ]
+        msg = diagnostic_array(
+            self.node,
+            f"{self.node.name}: pressure scanner",
+            level,
+            f"{lost} frames lost" if lost else "ok",
+            f"pwsc://udp:{self.client.port}",
+            values,
+        )
         self.diag.publish(msg)
 
     def close(self) -> None:
