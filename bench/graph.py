@@ -32,7 +32,12 @@ from rig_runtime.testing import graph_env, unique_domain_id
 from rosbags.highlevel import AnyReader
 
 
-def _sample_processes(launcher: Launcher, peaks: dict[str, float], cpu: dict[str, float]) -> None:
+def _sample_processes(
+    launcher: Launcher,
+    peaks: dict[str, float],
+    cpu: dict[str, float],
+    trace: dict[str, list[float]] | None = None,
+) -> None:
     for proc in launcher.processes:
         try:
             p = psutil.Process(proc.process.pid)
@@ -46,6 +51,8 @@ def _sample_processes(launcher: Launcher, peaks: dict[str, float], cpu: dict[str
         except psutil.Error:
             continue
         peaks[proc.spec.name] = max(peaks.get(proc.spec.name, 0.0), mem / 2**20)
+        if trace is not None:
+            trace.setdefault(proc.spec.name, []).append(mem / 2**20)
         cpu[proc.spec.name] = max(cpu.get(proc.spec.name, 0.0), total)
 
 
@@ -60,6 +67,7 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
     monitor = CampaignMonitor()
     peaks: dict[str, float] = {}
     cpu: dict[str, float] = {}
+    trace: dict[str, list[float]] = {}
     t0 = time.monotonic()
     launcher.start()
     t_first = None
@@ -68,7 +76,7 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
             monitor.spin(0.25)
             if t_first is None and monitor.k > 0:
                 t_first = time.monotonic()
-            _sample_processes(launcher, peaks, cpu)
+            _sample_processes(launcher, peaks, cpu, trace)
             if time.monotonic() - t0 > 1800:
                 raise RuntimeError("graph did not finish within 30 minutes")
     finally:
@@ -97,6 +105,11 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
         "max_refit_s": max(status_refits) if status_refits else None,
         "node_cpu_s": {k: round(v, 1) for k, v in cpu.items()},
         "node_peak_mb": {k: round(v, 1) for k, v in peaks.items()},
+        # Memory over the run (quartiles of the samples): flat means bounded buffers.
+        "identifier_mb_quartiles": [
+            round(float(np.percentile(trace.get("identifier", [0.0]), q)), 1)
+            for q in (25, 50, 75, 100)
+        ],
         "table1_all_levels": models["table1"]["markdown"],
     }
 
