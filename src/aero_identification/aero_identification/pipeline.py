@@ -4,11 +4,11 @@ identifier node and the offline fit from a bag.
 Per level: period clustering (k-means; the dominant cluster is kept), robust BLA over the two
 realizations with noise and nonlinear-distortion levels. Models, as in the paper (§4.1):
 
-- "all levels" (default): the PNLSS model is estimated on one realization of every level,
-  concatenated (realization ``estimation_realization``), and the other realization is its
-  validation set (model selection and the divergence guard). The linear models of this table are
-  the BLA of each level (BLA FRF) and the state-space model fitted to it (BLA SS): a linear model
-  is only valid around its own operating point.
+- "all levels" (default): the PNLSS model is estimated on one realization of every level
+  (realization ``estimation_realization``; one record per level, the mean of its kept periods),
+  and the other realization is its validation set (model selection and the divergence guard).
+  The linear models of this table are the BLA of each level (BLA FRF) and the state-space model
+  fitted to it (BLA SS): a linear model is only valid around its own operating point.
 - "level 1" (the paper's Table 1): BLA FRF, BLA SS and PNLSS all trained on the lowest level.
 
 Every model is tested on the single-sine records (unseen data): relative RMS error
@@ -293,11 +293,20 @@ def _fit_pnlss(
 ) -> PNLSSModel | None:
     est, val = config.estimation_realization, config.validation_realization
     cols = {lv: _kept_columns(assembler, result, lv, est) for lv in levels}
-    count = min(len(c) for c in cols.values())
-    if count < 1:
+    if min(len(c) for c in cols.values()) < 1:
         return None
-    u = np.stack([assembler.blocks[(lv, est)].u[:, cols[lv][-count:]] for lv in levels], axis=2)
-    y = np.stack([assembler.blocks[(lv, est)].y[:, cols[lv][-count:]] for lv in levels], axis=2)
+    # One training record per level: the mean of all its kept periods. The input is periodic,
+    # so Σ_p ||ŷ − y_p||² = P ||ŷ − ȳ||² + const: the same least-squares problem as fitting every
+    # period, P times cheaper, and every kept period counts even when the levels keep different
+    # numbers of periods.
+    u = np.stack(
+        [assembler.blocks[(lv, est)].u[:, cols[lv]].mean(axis=1, keepdims=True) for lv in levels],
+        axis=2,
+    )
+    y = np.stack(
+        [assembler.blocks[(lv, est)].y[:, cols[lv]].mean(axis=1, keepdims=True) for lv in levels],
+        axis=2,
+    )
     lines = _excited_lines(assembler, levels[0], est)
     data = PeriodicData(u, y, assembler.fs, lines)
     u_val, y_val = [], []

@@ -124,9 +124,9 @@ def test_same_seed_same_plan_other_seed_other_phases() -> None:
 
 
 def test_short_plan_has_the_same_structure_and_is_short(short: ExperimentPlan) -> None:
-    assert short.duration_s < 190.0
+    assert short.duration_s < 240.0
     assert [lv.offset_deg for lv in short.levels] == [6.6, 19.9]
-    assert all(len(lv.realizations) == 2 and lv.periods == 3 for lv in short.levels)
+    assert all(len(lv.realizations) == 2 and lv.periods == 4 for lv in short.levels)
     ms = short.levels[0].realizations[0]
     assert ms.N == 2000
     np.testing.assert_array_equal(
@@ -135,7 +135,7 @@ def test_short_plan_has_the_same_structure_and_is_short(short: ExperimentPlan) -
     assert short.baseline is None
     assert {t.sine.frequency_hz for t in short.sines} == {1.0, 1.6}
     kinds = [s.kind for s in short.segments]
-    assert kinds[:5] == ["ramp", "settle", "multisine", "multisine", "multisine"]
+    assert kinds[:6] == ["ramp", "settle", "multisine", "multisine", "multisine", "multisine"]
 
 
 def test_sample_stream_marks_segment_starts_and_ends(short: ExperimentPlan) -> None:
