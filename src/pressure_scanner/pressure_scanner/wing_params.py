@@ -36,8 +36,9 @@ class WingParams:
         (hazard 1/τ far past the mid-point). DESIGN.md §6 suggests 0.7° and 0.2 s; with those the
         stall time at 19.9° varies so much from cycle to cycle that even the period-averaged
         response explains only ~40% of a sine's variance (relative error 0.6-0.8), far from the
-        paper's rig, where PNLSS reaches 0.16-0.25 at the high level. 0.03 s / 0.5° keep the
-        randomness (clustering still sees it) but make the hysteresis loop repeatable enough (0.015 s: the 1.6 Hz sine floor drops from 0.30 to 0.18).
+        paper's rig, where PNLSS reaches 0.16-0.25 at the high level. 0.015 s / 0.5° keep the
+        randomness (clustering still sees it) but make the hysteresis loop repeatable enough
+        (0.015 s: the 1.6 Hz sine floor drops from 0.30 to 0.18).
         separation_noise_std, separation_noise_time_s: Ornstein–Uhlenbeck noise on √f in
         separated flow (σ = 0.03 → C_l std ≈ 0.045 fully separated at 25°).
     Leading-edge vortex (Beddoes–Leishman vortex lift, Leishman & Beddoes, JAHS 34(3), 1989)
