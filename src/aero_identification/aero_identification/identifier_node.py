@@ -50,10 +50,14 @@ PARAMETERS = [
 
 
 def _refit(
-    assembler: CampaignAssembler, config: IdentificationConfig, final: bool, out_dir: str
+    assembler: CampaignAssembler,
+    config: IdentificationConfig,
+    final: bool,
+    out_dir: str,
+    models_from: IdentificationResult | None = None,
 ) -> tuple[IdentificationResult, list[str]]:
-    """Worker-process job: identify and, when final, write the report."""
-    result = identify(assembler, config, final=final)
+    """Worker-process job: identify (or only validate, given models) and, when final, report."""
+    result = identify(assembler, config, final=final, models_from=models_from)
     written: list[str] = []
     if out_dir and final:
         written = [str(p) for p in write_report(result, assembler, out_dir).values()]
@@ -80,7 +84,9 @@ class Identifier:
         self.assembler: CampaignAssembler | None = None
         self.early: list[tuple[str, int, float]] = []
         self.last_k = {"u": -1, "y": -1}
-        self.pending: list[tuple[int, bool, str]] = []  # (needed k, final, reason)
+        # (needed k, final, reason, new multisine data: the models must be refitted)
+        self.pending: list[tuple[int, bool, str, bool]] = []
+        self.models_stale = True
         self.future: Future[tuple[IdentificationResult, list[str]]] | None = None
         self.future_reason = ""
         self.refit_started = 0.0
@@ -163,19 +169,26 @@ class Identifier:
             return
         kind = event.get("event")
         if kind == "plan_end":
-            self.pending.append((int(event["samples"]) - 1, True, "plan end"))
+            self.pending.append((int(event["samples"]) - 1, True, "plan end", False))
         elif kind == "plan_aborted":
-            self.pending.append((int(event["samples"]) - 1, True, "plan aborted"))
+            self.pending.append((int(event["samples"]) - 1, True, "plan aborted", True))
         elif kind == "end" and event.get("kind") == "multisine":
             level, real = int(event["level"]), int(event["realization"])
             block = self.assembler.blocks.get((level, real))
             if block is not None and int(event.get("period", -1)) == block.P - 1:
                 end_k = int(event["start_k"]) + int(event["length"]) - 1
-                self.pending.append((end_k, False, f"level {level} realization {real} complete"))
+                self.pending.append(
+                    (end_k, False, f"level {level} realization {real} complete", True)
+                )
         elif kind == "end" and event.get("kind") == "sine":
             end_k = int(event["start_k"]) + int(event["length"]) - 1
             self.pending.append(
-                (end_k, False, f"sine {event.get('frequency_hz')} Hz at {event.get('offset_deg')}°")
+                (
+                    end_k,
+                    False,
+                    f"sine {event.get('frequency_hz')} Hz at {event.get('offset_deg')}°",
+                    False,
+                )
             )
 
     # -- refits ---------------------------------------------------------------------------
@@ -191,6 +204,7 @@ class Identifier:
         # One refit covers every realization completed so far; the final one wins.
         final = any(item[1] for item in ready)
         reason = "; ".join(item[2] for item in ready)
+        self.models_stale |= any(item[3] for item in ready)
         self.pending = [item for item in self.pending if item[0] > have]
         self._start_refit(final, reason)
 
@@ -198,17 +212,22 @@ class Identifier:
         assert self.assembler is not None
         self.refit_started = time.monotonic()
         self.future_reason = reason
+        # Only sines completed since the last refit: keep the models, validate them again.
+        reuse = None if self.models_stale or self.last_result is None else self.last_result
         self.node.logger.info(
-            "refit %d (%s)%s", self.refits + 1, reason, " [final]" if final else ""
+            "%s %d (%s)%s",
+            "validation" if reuse is not None else "refit",
+            self.refits + 1,
+            reason,
+            " [final]" if final else "",
         )
+        args = (self.assembler, self.config, final, self.out_dir, reuse)
         if self.executor is not None:
-            self.future = self.executor.submit(
-                _refit, self.assembler, self.config, final, self.out_dir
-            )
+            self.future = self.executor.submit(_refit, *args)
         else:
             done: Future[tuple[IdentificationResult, list[str]]] = Future()
             try:
-                done.set_result(_refit(self.assembler, self.config, final, self.out_dir))
+                done.set_result(_refit(*args))
             except Exception as exc:
                 done.set_exception(exc)
             self.future = done
@@ -226,6 +245,7 @@ class Identifier:
             self.publish_status()
             return
         self.future = None
+        self.models_stale = False
         self.refits += 1
         self.refit_times.append(elapsed)
         self.last_result = result

@@ -188,8 +188,14 @@ def identify(
     assembler: CampaignAssembler,
     config: IdentificationConfig | None = None,
     final: bool = False,
+    models_from: IdentificationResult | None = None,
 ) -> IdentificationResult:
-    """Run the pipeline on whatever the assembler holds so far (partial results early on)."""
+    """Run the pipeline on whatever the assembler holds so far (partial results early on).
+
+    ``models_from``: reuse that result's clustering, BLAs and models and only validate on the
+    sines (the online node does this when only sine records completed since its last refit:
+    the multisine data, hence the models, are unchanged).
+    """
     config = config or IdentificationConfig()
     fs = assembler.fs
     result = IdentificationResult(config=config, fs=fs, complete=final)
@@ -197,6 +203,16 @@ def identify(
     level_ids = sorted(names, key=lambda lv: _level_offset(assembler, lv))
     est, val = config.estimation_realization, config.validation_realization
     t_start = time.perf_counter()
+    if models_from is not None:
+        result.levels = models_from.levels
+        result.linear_level1 = models_from.linear_level1
+        result.pnlss_all = models_from.pnlss_all
+        result.pnlss_level1 = models_from.pnlss_level1
+        result.warnings = [w for w in models_from.warnings if not w.startswith("sine ")]
+        result.timings_s = {"bla": 0.0, "pnlss": 0.0}
+        _validate_on_sines(assembler, result, names)
+        result.timings_s["total"] = time.perf_counter() - t_start
+        return result
 
     # 1. Per level: clustering of both realizations' periods and the robust BLA.
     for level in level_ids:
