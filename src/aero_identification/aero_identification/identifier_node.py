@@ -55,9 +55,10 @@ def _refit(
     final: bool,
     out_dir: str,
     models_from: IdentificationResult | None = None,
+    previous: IdentificationResult | None = None,
 ) -> tuple[IdentificationResult, list[str]]:
     """Worker-process job: identify (or only validate, given models) and, when final, report."""
-    result = identify(assembler, config, final=final, models_from=models_from)
+    result = identify(assembler, config, final=final, models_from=models_from, previous=previous)
     written: list[str] = []
     if out_dir and final:
         written = [str(p) for p in write_report(result, assembler, out_dir).values()]
@@ -221,7 +222,7 @@ class Identifier:
             reason,
             " [final]" if final else "",
         )
-        args = (self.assembler, self.config, final, self.out_dir, reuse)
+        args = (self.assembler, self.config, final, self.out_dir, reuse, self.last_result)
         if self.executor is not None:
             self.future = self.executor.submit(_refit, *args)
         else:

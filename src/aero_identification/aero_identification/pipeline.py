@@ -76,6 +76,7 @@ class IdentificationResult:
     warnings: list[str] = field(default_factory=list)
     timings_s: dict[str, float] = field(default_factory=dict)
     complete: bool = False
+    level1_signature: bytes = b""  # which level-1 periods the level-1 PNLSS was trained on
 
     @property
     def level_names(self) -> list[str]:
@@ -189,12 +190,14 @@ def identify(
     config: IdentificationConfig | None = None,
     final: bool = False,
     models_from: IdentificationResult | None = None,
+    previous: IdentificationResult | None = None,
 ) -> IdentificationResult:
     """Run the pipeline on whatever the assembler holds so far (partial results early on).
 
     ``models_from``: reuse that result's clustering, BLAs and models and only validate on the
     sines (the online node does this when only sine records completed since its last refit:
-    the multisine data, hence the models, are unchanged).
+    the multisine data, hence the models, are unchanged). ``previous``: the last refit, whose
+    level-1 PNLSS is reused when the level-1 periods it was trained on did not change.
     """
     config = config or IdentificationConfig()
     fs = assembler.fs
@@ -208,6 +211,7 @@ def identify(
         result.linear_level1 = models_from.linear_level1
         result.pnlss_all = models_from.pnlss_all
         result.pnlss_level1 = models_from.pnlss_level1
+        result.level1_signature = models_from.level1_signature
         result.warnings = [w for w in models_from.warnings if not w.startswith("sine ")]
         result.timings_s = {"bla": 0.0, "pnlss": 0.0}
         _validate_on_sines(assembler, result, names)
@@ -269,11 +273,21 @@ def identify(
     ]
     if result.linear_level1 is not None and ready:
         result.pnlss_all = _fit_pnlss(assembler, ready, result, config, "all levels")
-        result.pnlss_level1 = (
-            _fit_pnlss(assembler, [level_ids[0]], result, config, "level 1")
-            if level_ids[0] in ready
-            else None
-        )
+        if level_ids[0] in ready:
+            # Level 1 is complete long before the campaign ends: refit its PNLSS only when its
+            # kept periods changed (the fit is deterministic, so reuse gives the same model).
+            signature = _level_signature(assembler, result, level_ids[0])
+            if (
+                previous is not None
+                and previous.pnlss_level1 is not None
+                and (previous.level1_signature == signature)
+            ):
+                result.pnlss_level1 = previous.pnlss_level1
+            else:
+                result.pnlss_level1 = _fit_pnlss(
+                    assembler, [level_ids[0]], result, config, "level 1"
+                )
+            result.level1_signature = signature
     result.timings_s["pnlss"] = time.perf_counter() - t0
 
     # 3. Validation on the single sines.
@@ -298,6 +312,23 @@ def _kept_columns(
     cols = valid[-count:]
     keep = clusters.keep[:, column]
     return cols[keep] if keep.any() else cols
+
+
+def _level_signature(
+    assembler: CampaignAssembler, result: IdentificationResult, level: int
+) -> bytes:
+    """The estimation and validation periods a level's PNLSS fit would use, as bytes."""
+    cfg = result.config
+    parts = []
+    for m in (cfg.estimation_realization, cfg.validation_realization):
+        cols = _kept_columns(assembler, result, level, m)
+        block = assembler.blocks[(level, m)]
+        parts.append(
+            cols.astype(np.int64).tobytes()
+            + block.u[:, cols].tobytes()
+            + block.y[:, cols].tobytes()
+        )
+    return b"|".join(parts)
 
 
 def _fit_pnlss(

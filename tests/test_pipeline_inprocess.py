@@ -1,0 +1,86 @@
+"""The campaign pipeline on an in-process simulation of the short plan (no middleware)."""
+
+import json
+
+import numpy as np
+import pytest
+from aero_identification.campaign import CampaignAssembler
+from aero_identification.pipeline import IdentificationConfig, identify
+from multisine_gen.plan import short_plan
+from pitch_actuator.dynamics import ActuatorModel
+from pressure_scanner.integration import PressureIntegrator
+from pressure_scanner.plant import WingPlant
+
+T0 = 1_700_000_000_000_000_000
+
+
+@pytest.fixture(scope="module")
+def campaign() -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
+    plan = short_plan(seed=0)
+    command = np.radians(plan.command_deg())
+    actuator = ActuatorModel(fs=plan.fs, seed=0)
+    pitch = np.empty(len(command))
+    alpha = np.empty(len(command))
+    for k, c in enumerate(command):
+        sample = actuator.step(c)
+        pitch[k], alpha[k] = sample.position_rad, sample.alpha_true_rad
+    plant = WingPlant(seed=0)
+    pressures, _ = plant.simulate(alpha)
+    cl = PressureIntegrator(plant.taps).integrate(pressures, pitch, plant.dynamic_pressure_pa).cl
+    stamps = T0 + np.round(np.arange(len(command)) * 1e9 / plan.fs).astype(np.int64)
+    return json.loads(plan.to_json()), stamps, np.degrees(pitch), cl
+
+
+def _assemble(campaign, drop: int | None = None, duplicate: int | None = None) -> CampaignAssembler:
+    plan, stamps, u, y = campaign
+    asm = CampaignAssembler(plan, T0)
+    keep = np.ones(len(stamps), dtype=bool)
+    if drop is not None:
+        keep[drop] = False
+    asm.add_many("u", stamps[keep], u[keep])
+    asm.add_many("y", stamps, y)
+    if duplicate is not None:
+        asm.add("y", int(stamps[duplicate]), float(y[duplicate]))
+    return asm
+
+
+def test_periods_with_gaps_or_duplicates_are_excluded_and_reported(campaign) -> None:
+    plan = campaign[0]
+    seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 1)
+    asm = _assemble(campaign, drop=seg["start_k"] + 17, duplicate=seg["start_k"] + 40)
+    block = asm.blocks[(seg["level"], seg["realization"])]
+    valid = block.period_valid()
+    assert not valid[1] and valid[0] and valid[2]
+    problem = block.period_problem(1)
+    assert "1 pitch samples missing" in problem and "1 C_l samples duplicated" in problem
+    result = identify(asm, IdentificationConfig(max_iter=5))
+    excluded = result.levels[seg["level"]].excluded
+    assert any("period 1" in e and "missing" in e for e in excluded)
+
+
+def test_identification_of_the_short_campaign(campaign) -> None:
+    result = identify(_assemble(campaign), IdentificationConfig(), final=True)
+    assert result.level_names == ["low", "high"]
+    assert result.sine_freqs == [1.0, 1.6]
+    e_all, e_1 = result.errors_all, result.errors_level1
+    for f in (1.0, 1.6):
+        # Low level: every model near the gust floor; high level: PNLSS beats both linear models.
+        assert e_all[("PNLSS", "low", f)] < 0.15
+        assert e_all[("PNLSS", "high", f)] < e_all[("BLA SS", "high", f)]
+        assert e_all[("PNLSS", "high", f)] * 2 < e_1[("BLA SS", "high", f)]
+    markdown, csv = result.tables()["all_levels"]
+    assert markdown.splitlines()[0] == "| model | low 1 Hz | low 1.6 Hz | high 1 Hz | high 1.6 Hz |"
+    assert csv.count("\n") >= 3
+    assert json.dumps(result.to_json_dict(), allow_nan=True)
+
+
+def test_refits_reuse_unchanged_models_exactly(campaign) -> None:
+    asm = _assemble(campaign)
+    first = identify(asm, IdentificationConfig())
+    again = identify(asm, IdentificationConfig(), previous=first)
+    assert again.pnlss_level1 is first.pnlss_level1  # level 1 unchanged: not refitted
+    validated = identify(asm, IdentificationConfig(), final=True, models_from=first)
+    assert validated.pnlss_all is first.pnlss_all
+    assert (
+        validated.errors_all == first.errors_all and validated.errors_level1 == first.errors_level1
+    )
