@@ -57,6 +57,9 @@ class Lift:
         self.n_taps = self.integrator.taps.n_taps
         self.pitch_stamps: deque[int] = deque(maxlen=HISTORY)
         self.pitch_values: deque[float] = deque(maxlen=HISTORY)
+        # Exact stamps (simulation: taps k carry the stamp of state k) in O(1); bisect on the
+        # deques (O(n) indexing) only for the rig's interpolation.
+        self.pitch_by_stamp: dict[int, float] = {}
         self.pending: deque[tuple[int, Any]] = deque()
         self.counts = {"published": 0, "invalid": 0, "alpha_missing": 0}
         self.excluded_per_tap = np.zeros(self.n_taps, dtype=np.int64)
@@ -81,12 +84,18 @@ class Lift:
         stamp = stamp_to_ns(msg.header.stamp)
         if self.pitch_stamps and stamp <= self.pitch_stamps[-1]:
             return  # out of order or repeated: the history stays sorted
+        if len(self.pitch_stamps) == HISTORY:
+            self.pitch_by_stamp.pop(self.pitch_stamps[0], None)
         self.pitch_stamps.append(stamp)
         self.pitch_values.append(float(msg.position[i]))
+        self.pitch_by_stamp[stamp] = self.pitch_values[-1]
         while self.pending and self._alpha(self.pending[0][0], final=False) is not None:
             self._process(*self.pending.popleft())
 
     def _alpha(self, stamp: int, final: bool) -> float | None:
+        exact = self.pitch_by_stamp.get(stamp)
+        if exact is not None:
+            return exact
         stamps = self.pitch_stamps
         if not stamps or stamp > stamps[-1]:
             if final and stamps and stamp - stamps[-1] <= self.node.params["max_alpha_gap_s"] * 1e9:
