@@ -41,6 +41,7 @@ def typestore() -> Typestore:
     return get_typestore(Stores.ROS2_JAZZY)
 
 
+@functools.lru_cache(maxsize=1024)  # called per message: keep it a dictionary lookup
 def normalize_type_name(type_name: str) -> str:
     """``'sensor_msgs/JointState'`` or ``'sensor_msgs/msg/JointState'`` -> the latter."""
     parts = type_name.strip().strip("/").split("/")
