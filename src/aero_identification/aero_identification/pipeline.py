@@ -283,6 +283,8 @@ def identify(
                 and (previous.level1_signature == signature)
             ):
                 result.pnlss_level1 = previous.pnlss_level1
+            elif ready == [level_ids[0]]:
+                result.pnlss_level1 = result.pnlss_all  # the same data: the same fit
             else:
                 result.pnlss_level1 = _fit_pnlss(
                     assembler, [level_ids[0]], result, config, "level 1"
