@@ -41,7 +41,7 @@ def _sample_processes(
     for proc in launcher.processes:
         try:
             p = psutil.Process(proc.process.pid)
-            mem = p.memory_info().rss
+            mem = own = p.memory_info().rss
             times = p.cpu_times()
             total = times.user + times.system
             for child in p.children(recursive=True):  # the identifier's worker process
@@ -53,6 +53,7 @@ def _sample_processes(
         peaks[proc.spec.name] = max(peaks.get(proc.spec.name, 0.0), mem / 2**20)
         if trace is not None:
             trace.setdefault(proc.spec.name, []).append(mem / 2**20)
+            trace.setdefault(proc.spec.name + " (process only)", []).append(own / 2**20)
         cpu[proc.spec.name] = max(cpu.get(proc.spec.name, 0.0), total)
 
 
@@ -109,6 +110,10 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
         # worker process starts at the first refit; flat afterwards means bounded buffers.
         "identifier_mb_by_quarter": [
             round(float(np.max(q)), 1) for q in np.array_split(trace.get("identifier", [0.0]), 4)
+        ],
+        "identifier_node_only_mb_by_quarter": [
+            round(float(np.max(q)), 1)
+            for q in np.array_split(trace.get("identifier (process only)", [0.0]), 4)
         ],
         "table1_all_levels": models["table1"]["markdown"],
     }
