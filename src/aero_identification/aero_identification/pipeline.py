@@ -141,10 +141,26 @@ class IdentificationResult:
                 "level1": [[m, lv, f, e] for (m, lv, f), e in self.errors_level1.items()],
             },
             "table1": {"markdown": tables["all_levels"][0], "markdown_level1": tables["level1"][0]},
-            "predictions": self.predictions,
+            "predictions": [_trim_prediction(p) for p in self.predictions],
             "warnings": self.warnings,
             "timings_s": self.timings_s,
         }
+
+
+PAYLOAD_PERIODS = 2  # sine periods per prediction in the published model (C_l-alpha loops)
+
+
+def _trim_prediction(pred: dict[str, Any]) -> dict[str, Any]:
+    """The last PAYLOAD_PERIODS periods of a prediction, 5 decimals: the /identification/model
+    payload stays small (the full records go to the report's figures)."""
+    n = PAYLOAD_PERIODS * int(pred.get("samples_per_period", 0))
+    out: dict[str, Any] = {}
+    for key, value in pred.items():
+        if isinstance(value, list) and n:
+            out[key] = [round(float(v), 5) for v in value[-n:]]
+        else:
+            out[key] = value
+    return out
 
 
 def _level_names(assembler: CampaignAssembler) -> dict[int, str]:
@@ -481,6 +497,7 @@ def _validate_on_sines(
                 "name": f"sine {name} {rec.frequency_hz:g} Hz",
                 "level": name,
                 "frequency_hz": rec.frequency_hz,
+                "samples_per_period": rec.samples_per_period,
                 "alpha_deg": rec.u.tolist(),
                 "cl_measured": rec.y.tolist(),
                 **{f"cl_{k}": v.tolist() for k, v in preds.items()},
