@@ -28,7 +28,7 @@ from aero_rig.cli import CampaignMonitor, _config
 from rig_runtime.graph import load_graph
 from rig_runtime.launcher import Launcher
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.testing import graph_env, unique_domain_id
+from rig_runtime.testing import graph_env, join_graph, unique_domain_id
 from rosbags.highlevel import AnyReader
 
 
@@ -167,11 +167,7 @@ def main() -> int:
     parser.add_argument("--latency-seconds", type=float, default=20.0)
     parser.add_argument("--keep", default=None, help="keep the run directory here")
     args = parser.parse_args()
-    import os
-
-    env = graph_env(unique_domain_id())
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        os.environ[key] = env[key]
+    join_graph(graph_env(unique_domain_id()))
     with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
         run_dir = Path(args.keep or tmp)
         figures = throughput(args.plan, run_dir / "run")

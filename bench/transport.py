@@ -13,7 +13,6 @@ Last line: JSON with sent, received, lost, throughput_msg_s, rtt_p50_ms, rtt_p99
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import time
@@ -21,7 +20,7 @@ import time
 import numpy as np
 from rig_runtime.demo_nodes import make_message
 from rig_runtime.node import Node
-from rig_runtime.testing import graph_env, unique_domain_id
+from rig_runtime.testing import graph_env, join_graph, unique_domain_id
 
 CLOUD = "sensor_msgs/msg/PointCloud2"
 RESULT = "std_msgs/msg/String"
@@ -67,9 +66,7 @@ def main() -> int:
         return echo_main()
 
     env = graph_env(unique_domain_id())
-    os.environ.update(
-        {k: env[k] for k in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK")}
-    )
+    join_graph(env)
     echo = subprocess.Popen([sys.executable, __file__, "--echo"], env=env)
     try:
         node = Node("bench_ping", argv=[])

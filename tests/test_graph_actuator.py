@@ -7,7 +7,7 @@ import numpy as np
 from graph_support import Observer
 from multisine_gen.plan import short_plan
 from pitch_actuator.dynamics import ActuatorModel
-from rig_runtime.testing import Processes, graph_env
+from rig_runtime.testing import Processes, graph_env, join_graph
 
 TOPICS = {
     "/pitch/command": ("sensor_msgs/msg/JointState", "stream"),
@@ -19,8 +19,7 @@ TOPICS = {
 
 def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeypatch) -> None:
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     plan = short_plan(seed=3)
     observer = Observer(TOPICS)
     try:

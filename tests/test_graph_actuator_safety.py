@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env
+from rig_runtime.testing import Processes, graph_env, join_graph
 
 FS = 200.0
 PERIOD_NS = 5_000_000
@@ -133,8 +133,7 @@ class ActuatorClient:
 def actuator(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
     """Start sim_actuator with the given parameters; yields (client, processes)."""
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     client = ActuatorClient()
     procs = Processes(env, log_dir=tmp_path)
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, wait_for
+from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 
 RATE_HZ = 200.0  # controller rate
 COMMAND_HZ = 100.0  # commands from this test, paced by the wall clock
@@ -121,8 +121,7 @@ def _audit(path: Path) -> list[dict[str, Any]]:
 def rig(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
     """start(**params) -> (client, processes, audit path): sim_controller + hw_actuator."""
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     client = HwClient()
     procs = Processes(env, log_dir=tmp_path)
     audit = tmp_path / "audit.jsonl"

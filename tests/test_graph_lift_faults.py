@@ -19,7 +19,7 @@ from pressure_scanner.taps import load_taps
 from pressure_scanner.wing_params import WingParams
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env
+from rig_runtime.testing import Processes, graph_env, join_graph
 
 PERIOD_NS = 5_000_000
 ALPHA_DEG = 8.0
@@ -102,8 +102,7 @@ class LiftClient:
 @pytest.fixture
 def lift(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     client = LiftClient()
     with Processes(env, log_dir=tmp_path) as procs:
         try:

@@ -19,7 +19,7 @@ from pressure_scanner.sim_scanner import alpha_rad, zero_offsets_pa
 from pressure_scanner.tap_cloud import read_cloud
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, wait_for
+from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 
 RATE_HZ = 200.0
 PERIOD_NS = 5_000_000
@@ -69,8 +69,7 @@ def test_scanner_node_publishes_plant_pressures_counts_faults_and_tares(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     client = ScannerClient()
     try:
         with Processes(env, log_dir=tmp_path) as procs:

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 from graph_support import Observer
 from multisine_gen.plan import short_plan
-from rig_runtime.testing import Processes, graph_env
+from rig_runtime.testing import Processes, graph_env, join_graph
 
 TOPICS = {
     "/pitch/state": ("sensor_msgs/msg/JointState", "stream"),
@@ -17,8 +17,7 @@ TOPICS = {
 
 def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -> None:
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     total = short_plan(seed=1).total_samples
     observer = Observer(TOPICS)
     try:

@@ -23,7 +23,7 @@ from pressure_scanner.wing_params import WingParams
 from rerun.chunk import RrdReader
 from rig_runtime.messages import new_message, serialize, set_stamp, typestore
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, wait_for
+from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from aero_rig import view as rig_view
@@ -366,8 +366,7 @@ def test_view_node_records_what_it_receives_over_dds(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     rrd_path = tmp_path / "live" / "view.rrd"
     topics = {
         "/pitch/command": ("sensor_msgs/msg/JointState", "stream"),

@@ -35,6 +35,18 @@ def graph_env(domain_id: int | None = None, **extra: str) -> dict[str, str]:
     return env
 
 
+DDS_KEYS = ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK")
+
+
+def join_graph(env: dict[str, str], setenv: Callable[[str, str], None] | None = None) -> None:
+    """Point this process's own nodes at the graph of ``env`` (same domain, backend, network).
+
+    Tests pass ``monkeypatch.setenv`` so the change is undone after the test.
+    """
+    for key in DDS_KEYS:
+        (setenv or os.environ.__setitem__)(key, env[key])
+
+
 def wait_for(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.05) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
