@@ -41,3 +41,31 @@ class Observer:
 
     def close(self) -> None:
         self.node.close()
+
+
+def subscribe_diagnostics(
+    node: Node, name_part: str, entries: list[Any], hardware_id: bool = False
+) -> Any:
+    """Append the values (dict) of every /diagnostics status whose name holds ``name_part`` to
+    ``entries`` (as ``(hardware_id, values)`` with ``hardware_id=True``)."""
+
+    def on_array(msg: Any) -> None:
+        for status in msg.status:
+            if name_part in status.name:
+                values = {kv.key: kv.value for kv in status.values}
+                entries.append((status.hardware_id, values) if hardware_id else values)
+
+    return node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", on_array)
+
+
+def wait_diagnostics(
+    node: Node,
+    entries: list[Any],
+    predicate: Any,
+    timeout_s: float = 10.0,
+    values: Any = lambda entry: entry,
+) -> Any:
+    """Spin until the latest collected status satisfies ``predicate``; return that entry."""
+    ok = node.spin_until(lambda: bool(entries) and predicate(values(entries[-1])), timeout_s)
+    assert ok, f"diagnostics never satisfied the check; last: {entries[-1:]}"
+    return entries[-1]

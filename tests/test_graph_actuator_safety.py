@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from graph_support import subscribe_diagnostics, wait_diagnostics
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph
@@ -47,9 +48,7 @@ class ActuatorClient:
             self.node.create_subscription(
                 "sensor_msgs/msg/JointState", "/pitch/state", self._on_state, "stream"
             ),
-            self.node.create_subscription(
-                "diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self._on_diag
-            ),
+            subscribe_diagnostics(self.node, "pitch actuator safety", self.diagnostics),
         ]
         self.t0_ns = time.time_ns() // PERIOD_NS * PERIOD_NS
         self.next_k = 0
@@ -59,11 +58,6 @@ class ActuatorClient:
         pitch = math.degrees(msg.position[names.index("pitch")])
         alpha = math.degrees(msg.position[names.index("alpha_true")])
         self.states.append((stamp_to_ns(msg.header.stamp), pitch, alpha))
-
-    def _on_diag(self, msg: Any) -> None:
-        for status in msg.status:
-            if "pitch actuator safety" in status.name:
-                self.diagnostics.append({kv.key: kv.value for kv in status.values})
 
     def wait_ready(self, timeout_s: float = 30.0) -> bool:
         return self.node.spin_until(
@@ -119,11 +113,7 @@ class ActuatorClient:
         return (stamps - self.t0_ns) / 1e9, np.array([seen[s] for s in stamps])
 
     def wait_diagnostics(self, predicate: Any, timeout_s: float = 10.0) -> dict[str, str]:
-        ok = self.node.spin_until(
-            lambda: bool(self.diagnostics) and predicate(self.diagnostics[-1]), timeout_s
-        )
-        assert ok, f"diagnostics never satisfied the check; last: {self.diagnostics[-1:]}"
-        return self.diagnostics[-1]
+        return wait_diagnostics(self.node, self.diagnostics, predicate, timeout_s)
 
     def close(self) -> None:
         self.node.close()

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from graph_support import subscribe_diagnostics, wait_diagnostics
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
@@ -42,20 +43,14 @@ class HwClient:
             self.node.create_subscription(
                 "sensor_msgs/msg/JointState", "/pitch/state", self._on_state, "stream"
             ),
-            self.node.create_subscription(
-                "diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self._on_diag
+            subscribe_diagnostics(
+                self.node, "pitch actuator safety", self.diagnostics, hardware_id=True
             ),
         ]
 
     def _on_state(self, msg: Any) -> None:
         pitch = math.degrees(msg.position[list(msg.name).index("pitch")])
         self.states.append((stamp_to_ns(msg.header.stamp), pitch))
-
-    def _on_diag(self, msg: Any) -> None:
-        for status in msg.status:
-            if "pitch actuator safety" in status.name:
-                values = {kv.key: kv.value for kv in status.values}
-                self.diagnostics.append((status.hardware_id, values))
 
     def wait_ready(self, timeout_s: float = 30.0) -> bool:
         # States flow as soon as the node has fed the controller a heartbeat.
@@ -100,11 +95,9 @@ class HwClient:
     def wait_diagnostics(
         self, predicate: Callable[[dict[str, str]], bool], timeout_s: float = 10.0
     ) -> tuple[str, dict[str, str]]:
-        ok = self.node.spin_until(
-            lambda: bool(self.diagnostics) and predicate(self.diagnostics[-1][1]), timeout_s
+        return wait_diagnostics(
+            self.node, self.diagnostics, predicate, timeout_s, values=lambda e: e[1]
         )
-        assert ok, f"diagnostics never satisfied the check; last: {self.diagnostics[-1:]}"
-        return self.diagnostics[-1]
 
     def close(self) -> None:
         self.node.close()

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from graph_support import subscribe_diagnostics, wait_diagnostics
 from pressure_scanner.integration import PressureIntegrator
 from pressure_scanner.plant import WingPlant
 from pressure_scanner.tap_cloud import fill_cloud
@@ -40,9 +41,7 @@ class LiftClient:
             self.node.create_subscription(
                 "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", self._on_out, "stream"
             ),
-            self.node.create_subscription(
-                "diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self._on_diag
-            ),
+            subscribe_diagnostics(self.node, "pressure integration", self.diagnostics),
         ]
         taps = load_taps()
         wing = WingParams()
@@ -52,11 +51,6 @@ class LiftClient:
     def _on_out(self, msg: Any) -> None:
         v = msg.vector
         self.out.append((stamp_to_ns(msg.header.stamp), np.array([v.x, v.y, v.z])))
-
-    def _on_diag(self, msg: Any) -> None:
-        for status in msg.status:
-            if "pressure integration" in status.name:
-                self.diagnostics.append({kv.key: kv.value for kv in status.values})
 
     def wait_ready(self, timeout_s: float = 30.0) -> bool:
         return self.node.spin_until(
@@ -89,11 +83,7 @@ class LiftClient:
         return self.node.spin_until(lambda: len(self.out) >= n, timeout_s)
 
     def wait_diagnostics(self, predicate: Any, timeout_s: float = 10.0) -> dict[str, str]:
-        ok = self.node.spin_until(
-            lambda: bool(self.diagnostics) and predicate(self.diagnostics[-1]), timeout_s
-        )
-        assert ok, f"diagnostics never satisfied the check; last: {self.diagnostics[-1:]}"
-        return self.diagnostics[-1]
+        return wait_diagnostics(self.node, self.diagnostics, predicate, timeout_s)
 
     def close(self) -> None:
         self.node.close()

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from graph_support import subscribe_diagnostics
 from pressure_scanner.plant import WingPlant
 from pressure_scanner.sim_scanner import alpha_rad, zero_offsets_pa
 from pressure_scanner.tap_cloud import read_cloud
@@ -47,19 +48,12 @@ class ScannerClient:
             self.node.create_subscription(
                 "sensor_msgs/msg/PointCloud2", "/pressure/taps", self._on_taps, "stream"
             ),
-            self.node.create_subscription(
-                "diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self._on_diag
-            ),
+            subscribe_diagnostics(self.node, "pressure scanner", self.diagnostics),
         ]
 
     def _on_taps(self, msg: Any) -> None:
         _, pressures = read_cloud(msg)
         self.frames.append((stamp_to_ns(msg.header.stamp), pressures))
-
-    def _on_diag(self, msg: Any) -> None:
-        for status in msg.status:
-            if "pressure scanner" in status.name:
-                self.diagnostics.append({kv.key: kv.value for kv in status.values})
 
     def close(self) -> None:
         self.node.close()

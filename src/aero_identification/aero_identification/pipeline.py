@@ -467,20 +467,19 @@ def _validate_on_sines(
         y_mean, u_mean = float(np.mean(rec.y)), float(np.mean(rec.u))
         preds: dict[str, np.ndarray] = {}
         low = next(iter(sorted(result.levels.values(), key=lambda r: r.offset_deg)))
-        if own.bla is not None and own.linear is not None:
-            y_frf = predict_bla_sine(own.bla, rec.frequency_hz, rec.u, y_mean)
-            result.errors_all[("BLA FRF", name, f)] = relative_rms_error(rec.y, y_frf)
-            lin = own.linear.with_operating_point(u_mean, y_mean)
+        # Linear models predict deviations: centred on the record's measured means.
+        for lin_level, errors, key in (
+            (own, result.errors_all, "BLA SS (own level)"),
+            (low, result.errors_level1, "BLA SS (level 1)"),
+        ):
+            if lin_level.bla is None or lin_level.linear is None:
+                continue
+            y_frf = predict_bla_sine(lin_level.bla, rec.frequency_hz, rec.u, y_mean)
+            errors[("BLA FRF", name, f)] = relative_rms_error(rec.y, y_frf)
+            lin = lin_level.linear.with_operating_point(u_mean, y_mean)
             y_ss = _steady_state(lin, rec.u, rec.samples_per_period)
-            result.errors_all[("BLA SS", name, f)] = relative_rms_error(rec.y, y_ss)
-            preds["BLA SS (own level)"] = y_ss
-        if low.bla is not None and low.linear is not None:
-            y_frf1 = predict_bla_sine(low.bla, rec.frequency_hz, rec.u, y_mean)
-            result.errors_level1[("BLA FRF", name, f)] = relative_rms_error(rec.y, y_frf1)
-            lin1 = low.linear.with_operating_point(u_mean, y_mean)
-            y_ss1 = _steady_state(lin1, rec.u, rec.samples_per_period)
-            result.errors_level1[("BLA SS", name, f)] = relative_rms_error(rec.y, y_ss1)
-            preds["BLA SS (level 1)"] = y_ss1
+            errors[("BLA SS", name, f)] = relative_rms_error(rec.y, y_ss)
+            preds[key] = y_ss
         for model, errors, key in (
             (result.pnlss_all, result.errors_all, "PNLSS (all levels)"),
             (result.pnlss_level1, result.errors_level1, "PNLSS (level 1)"),

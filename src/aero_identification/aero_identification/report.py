@@ -8,6 +8,7 @@ import csv
 import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -87,6 +88,16 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return path
 
 
+def _finish(fig: Figure, ax: Any, path: str | Path, xlabel: str, ylabel: str, title: str) -> Path:
+    """Labels, legend and grid of a single-axes figure, then save it."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(True, alpha=0.3)
+    return _save(fig, path)
+
+
 def _db_amplitude(x: np.ndarray) -> np.ndarray:
     return 20 * np.log10(np.maximum(np.abs(x), 1e-300))
 
@@ -151,12 +162,7 @@ def plot_output_spectrum(
         label="even",
     )
     ax.plot(bla.noise_freq, _db_amplitude(bla.noise_level), "-", color="0.5", lw=1, label="noise σ")
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.legend(loc="best", fontsize="small")
-    ax.grid(True, alpha=0.3)
-    return _save(fig, path)
+    return _finish(fig, ax, path, "frequency [Hz]", ylabel, title)
 
 
 def plot_clusters(
@@ -230,12 +236,7 @@ def plot_time_series(
     ax.plot(t, y_measured, "k-", lw=1.2, label="measured")
     for name, y_sim in y_simulated.items():
         ax.plot(t, y_sim, lw=1.0, label=name)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.legend(loc="best", fontsize="small")
-    ax.grid(True, alpha=0.3)
-    return _save(fig, path)
+    return _finish(fig, ax, path, "time [s]", ylabel, title)
 
 
 def plot_cl_alpha(
@@ -261,9 +262,4 @@ def plot_cl_alpha(
     ax.plot(alpha_deg, cl_measured, "k-", lw=1.0, label="measured")
     for name, cl in (cl_simulated or {}).items():
         ax.plot(alpha_deg, cl, lw=1.0, label=name)
-    ax.set_xlabel("α [°]")
-    ax.set_ylabel("C_l")
-    ax.set_title(title)
-    ax.legend(loc="best", fontsize="small")
-    ax.grid(True, alpha=0.3)
-    return _save(fig, path)
+    return _finish(fig, ax, path, "α [°]", "C_l", title)

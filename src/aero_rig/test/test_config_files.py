@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 import yaml
+from aero_rig.launch_description import DESIGN_TOPICS
 from rig_runtime.graph import NodeSpec, entry_point, load_graph
 from rig_runtime.params import Parameter, ParameterError, resolve_parameters
 
@@ -24,16 +25,6 @@ NOT_DEFAULT = {
     ("generator.yaml", "wait_for_subscribers"),  # the actuator and the recorder
     ("recorder.yaml", "topics"),  # the DESIGN.md §4 topics instead of everything
     ("view.yaml", "mode"),  # a live view opens a viewer (the node's default only saves)
-}
-DESIGN_TOPICS = {
-    "/pitch/command",
-    "/pitch/state",
-    "/pressure/taps",
-    "/wing/coefficients",
-    "/experiment/plan",
-    "/experiment/segment",
-    "/identification/status",
-    "/identification/model",
 }
 
 
@@ -250,7 +241,7 @@ def test_lift_qos_matches_its_publishers(graph: str, publishers: dict[str, str])
 @pytest.mark.parametrize("graph", ["sim.yaml", "rig.yaml"])
 def test_recorder_records_the_design_topics(graph: str) -> None:
     recorder = _resolve(load_graph(CONFIG / graph).node("recorder"))
-    assert DESIGN_TOPICS <= set(recorder["topics"])
+    assert set(DESIGN_TOPICS) <= set(recorder["topics"])
     assert recorder["output"] == "", "the bag directory is chosen per run"
 
 
