@@ -31,7 +31,7 @@ from .campaign import CampaignAssembler, PeriodBlock, SineRecord
 from .clustering import ClusterResult, period_clusters
 from .data import PeriodicData
 from .metrics import predict_bla_sine, relative_rms_error
-from .pnlss import PNLSSModel, fit_pnlss
+from .pnlss import PNLSSModel, fit_pnlss, linear_states, periodic_records
 from .subspace import LinearStateSpace, fit_linear_ss
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
@@ -374,15 +374,27 @@ def _fit_pnlss(
     )
     lines = _excited_lines(assembler, levels[0], est)
     data = PeriodicData(u, y, assembler.fs, lines)
-    u_val, y_val = [], []
-    for lv in levels:
-        vcols = _kept_columns(assembler, result, lv, val)
-        block = assembler.blocks[(lv, val)]
-        u_val.append(block.u[:, vcols].T.ravel())
-        y_val.append(block.y[:, vcols].T.ravel())
+    # Validation: the other realization, likewise one steady-state mean period per level
+    # (its kept periods), so choosing the best iterate costs one period's simulation per
+    # level instead of all of them.
+    vcols = {lv: _kept_columns(assembler, result, lv, val) for lv in levels}
+    if min(len(c) for c in vcols.values()) < 1:
+        return None
+    u_val, y_val = (
+        np.stack(
+            [
+                getattr(assembler.blocks[(lv, val)], name)[:, vcols[lv]].mean(
+                    axis=1, keepdims=True
+                )
+                for lv in levels
+            ],
+            axis=2,
+        )
+        for name in ("u", "y")
+    )
+    validation = PeriodicData(u_val, y_val, assembler.fs, lines)
     lin = result.linear_level1
     assert lin is not None
-    validation = (np.concatenate(u_val), np.concatenate(y_val))
     try:
         start = _output_equation_start(data, lin, config, validation)
         return fit_pnlss(
@@ -403,7 +415,7 @@ def _output_equation_start(
     data: PeriodicData,
     lin: LinearStateSpace,
     config: IdentificationConfig,
-    validation: tuple[np.ndarray, np.ndarray],
+    validation: PeriodicData,
 ) -> PNLSSModel:
     """A PNLSS start whose output equation already holds the static nonlinearity.
 
@@ -414,8 +426,6 @@ def _output_equation_start(
     """
     from dataclasses import replace
 
-    from scipy.signal import dlsim
-
     from .monomials import evaluate_monomials
 
     base = fit_pnlss(
@@ -423,13 +433,14 @@ def _output_equation_start(
         validation=validation,
     )  # fmt: skip
     nx = base.nx
+    un_all = (data.u - base.u_mean[0]) / base.u_scale[0]
+    # Steady-state states of every period: one whole period of its input simulated first.
+    states = linear_states(base.A, base.B, periodic_records(un_all, data.N))[:, data.N :]
     rows, targets = [], []
     for m in range(data.M):
         for p in range(data.P):
-            un = (data.u[:, p, m] - base.u_mean[0]) / base.u_scale[0]
-            twice = np.concatenate([un, un])[:, None]
-            _, _, x = dlsim((base.A, base.B, np.eye(nx), np.zeros((nx, 1)), 1.0), twice)
-            x = np.asarray(x)[data.N :]
+            un = un_all[:, p, m]
+            x = states[m * data.P + p]
             z = np.column_stack([x, un])
             eta = evaluate_monomials(z, base.exponents_output)
             rows.append(np.column_stack([x, un, eta, np.ones(data.N)]))

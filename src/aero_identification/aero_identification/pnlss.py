@@ -379,6 +379,29 @@ def default_transient(A: np.ndarray, N: int, decay: float = 1e-4) -> int:
     return int(min(N, max(1, math.ceil(math.log(decay) / math.log(rho)))))
 
 
+def linear_states(A: np.ndarray, B: np.ndarray, u_rec: np.ndarray) -> np.ndarray:
+    """States of x(t+1) = A x(t) + B u(t) from x = 0 for (R, T, nu) records -> (R, T, nx)."""
+    nx, nu = B.shape
+    empty = np.zeros((0, nx + nu), dtype=np.int64)
+    return simulate_records(  # the PNLSS kernel with E = F = 0 and the states as outputs
+        np.ascontiguousarray(A, dtype=float), np.ascontiguousarray(B, dtype=float),
+        np.eye(nx), np.zeros((nx, nu)), np.zeros((nx, 0)), np.zeros((nx, 0)), empty, empty,
+        np.ascontiguousarray(u_rec, dtype=float), np.zeros((u_rec.shape[0], nx)), np.inf,
+    )  # fmt: skip
+
+
+def periodic_records(u: np.ndarray, n_transient: int) -> np.ndarray:
+    """(N, P, M) periods -> (P·M, n_transient + N, 1) records, each preceded by its own tail.
+
+    The input is periodic, so simulating the last n_transient samples of a period before it
+    starts the period in (close to) its steady state; those leading outputs are discarded.
+    """
+    N, P, M = u.shape
+    per = np.asarray(u, dtype=float).transpose(2, 1, 0).reshape(P * M, N)
+    tail = np.arange(-n_transient, 0) % N
+    return np.ascontiguousarray(np.concatenate([per[:, tail], per], axis=1)[:, :, None])
+
+
 def _initial_from_linear(
     lin: LinearStateSpace, u_rec: np.ndarray, u_scale: np.ndarray, y_scale: np.ndarray
 ) -> dict[str, np.ndarray]:
@@ -393,12 +416,7 @@ def _initial_from_linear(
     C = lin.C / y_scale[:, None]
     D = lin.D * u_scale[None, :] / y_scale[:, None]
     nx = A.shape[0]
-    empty = np.zeros((0, nx + lin.nu), dtype=np.int64)
-    # States as outputs (C = I, D = 0) to measure their RMS on the training records.
-    x = simulate_records(
-        A, np.ascontiguousarray(B), np.eye(nx), np.zeros((nx, lin.nu)), np.zeros((nx, 0)),
-        np.zeros((nx, 0)), empty, empty, u_rec, np.zeros((u_rec.shape[0], nx)), np.inf,
-    )  # fmt: skip
+    x = linear_states(A, B, u_rec)  # their RMS on the training records
     std = np.sqrt(np.mean(x.reshape(-1, nx) ** 2, axis=0))
     std[~(std > 0)] = 1.0
     return {
@@ -415,7 +433,7 @@ def fit_pnlss(
     degrees: Sequence[int] = (2, 3),
     structure: str = "full",
     max_iter: int = 100,
-    validation: tuple[np.ndarray, np.ndarray] | None = None,
+    validation: tuple[np.ndarray, np.ndarray] | PeriodicData | None = None,
     *,
     n_transient: int | None = None,
     weighting: str | np.ndarray | None = None,
@@ -433,10 +451,11 @@ def fit_pnlss(
         degrees: total degrees of the monomials (each >= 2), e.g. (2, 3).
         structure: "full", "statesonly" or "inputsonly" (monomials.py).
         max_iter: number of LM trials (accepted or rejected).
-        validation: (u_val, y_val), 1-D records of equal length in absolute units. The first
-            min(n_transient, length // 2) samples are left out of the validation error (the
-            simulation starts at the operating point). Used for the divergence guard and to
-            choose the returned model.
+        validation: (u_val, y_val), 1-D records of equal length in absolute units, whose
+            first min(n_transient, length // 2) samples are left out of the validation error
+            (the simulation starts at the operating point); or PeriodicData of held-out periods
+            (same N), each simulated in steady state like the training records. Used for the
+            divergence guard and to choose the returned model.
         n_transient: samples prepended to each record; default: the decay time of the slowest
             linear mode to 1e-4 (at most one period).
         weighting: None (time-domain cost), "noise" (1/σ²_Y(k) per DFT bin, from the periods;
@@ -501,15 +520,23 @@ def fit_pnlss(
     nt = default_transient(lin.A, N) if n_transient is None else int(n_transient)
     if nt < 0:
         raise ValueError(f"n_transient must be >= 0; got {nt}")
-    u_per = ((data.u - u_mean[0]) / u_scale[0]).transpose(2, 1, 0).reshape(R, N)
+    u_rec = periodic_records((data.u - u_mean[0]) / u_scale[0], nt)
     y_per = ((data.y - y_mean[0]) / y_scale[0]).transpose(2, 1, 0).reshape(R, N)
-    tail = np.arange(-nt, 0) % N
-    u_rec = np.ascontiguousarray(np.concatenate([u_per[:, tail], u_per], axis=1)[:, :, None])
     y_rec = np.ascontiguousarray(y_per[:, :, None])
     x0_rec = np.zeros((R, nx))
 
-    # Validation record.
-    if validation is not None:
+    # Validation records: periodic (each period in steady state, like the training records)
+    # or one 1-D record simulated from the operating point.
+    if isinstance(validation, PeriodicData):
+        if validation.u.shape[0] != N:
+            raise ValueError(
+                f"validation periods have {validation.u.shape[0]} samples; training periods "
+                f"have {N}"
+            )
+        nt_val = nt
+        u_val_n = periodic_records((validation.u - u_mean[0]) / u_scale[0], nt)
+        y_val_tail = validation.y.transpose(2, 1, 0).reshape(-1, N)
+    elif validation is not None:
         u_val, y_val = (np.asarray(v, dtype=float).reshape(-1) for v in validation)
         if u_val.shape != y_val.shape:
             raise ValueError(
@@ -522,7 +549,7 @@ def fit_pnlss(
             )
         nt_val = min(nt, u_val.size // 2)
         u_val_n = np.ascontiguousarray(((u_val - u_mean[0]) / u_scale[0])[None, :, None])
-        y_val_tail = y_val[nt_val:]
+        y_val_tail = y_val[None, nt_val:]
 
     # Weighting.
     sqrt_w: np.ndarray | None = None
@@ -574,7 +601,8 @@ def fit_pnlss(
     def val_cost(th: np.ndarray) -> float:
         if validation is None:
             return math.nan
-        y = y_mean[0] + y_scale[0] * simulate(th, u_val_n, np.zeros((1, nx)))[0, nt_val:, 0]
+        x0 = np.zeros((u_val_n.shape[0], nx))
+        y = y_mean[0] + y_scale[0] * simulate(th, u_val_n, x0)[:, nt_val:, 0]
         c = float(np.mean((y - y_val_tail) ** 2))
         return c if math.isfinite(c) else math.inf
 

@@ -240,3 +240,20 @@ def test_qr_and_normal_equation_solvers_give_the_same_fit(duffing_case):
     assert [r.accepted for r in fits[0].history_] == [r.accepted for r in fits[1].history_]
     np.testing.assert_allclose(fits[0].simulate(c.u_val), fits[1].simulate(c.u_val), rtol=1e-6,
                                atol=1e-9 * np.std(c.y_val))  # fmt: skip
+
+
+def test_periodic_validation_periods_choose_the_model_in_steady_state(duffing_case):
+    c = duffing_case
+    held_out = PeriodicData(
+        u=c.u_val[N:, None, None], y=c.y_val[N:, None, None], fs=1.0, excited_lines=LINES
+    )
+    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=40, validation=held_out)
+    noise_floor = rel_rms(c.y_val, c.y_val_true)
+    assert rel_rms(c.y_val, model.simulate(c.u_val)) <= 2 * noise_floor
+    # cost_val_ is the steady-state error on the held-out period (second period of a
+    # two-period simulation from the operating point).
+    y_hat = model.simulate(c.u_val)[N:]
+    assert model.cost_val_ == pytest.approx(np.mean((y_hat - c.y_val[N:]) ** 2), rel=1e-3)
+    with pytest.raises(ValueError, match="validation periods have"):
+        short = PeriodicData(u=held_out.u[:-2], y=held_out.y[:-2], fs=1.0, excited_lines=LINES)
+        fit_pnlss(c.data, c.lin, max_iter=1, validation=short)

@@ -14,7 +14,9 @@
   many processes one domain holds on one host.
 """
 
+import ctypes
 import os
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,6 +34,7 @@ from cyclonedds.core import (
     WaitSet,
 )
 from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.internal import DDS
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
@@ -44,6 +47,17 @@ from .qos import QosProfile
 
 _ANY_STATE = SampleState.Any | ViewState.Any | InstanceState.Any
 _TAKE_BATCH = 256
+
+# Write batching (Cyclone's per-domain ``whc_batch``): a write queues its RTPS submessage in the
+# writer's packet instead of sending a UDP datagram per sample; the executor flushes every
+# writer that wrote at the end of each turn (DdsBackend.spin_once), so a burst of samples
+# handled in one turn leaves as a few full datagrams, and a lone sample leaves at once.
+_dds_write_set_batch = DDS._dll_handle.dds_write_set_batch
+_dds_write_set_batch.argtypes = [ctypes.c_bool]
+_dds_write_set_batch.restype = None
+_dds_write_flush = DDS._dll_handle.dds_write_flush
+_dds_write_flush.argtypes = [ctypes.c_int32]
+_dds_write_flush.restype = ctypes.c_int32
 
 
 def domain_id() -> int:
@@ -132,7 +146,36 @@ def participant() -> DomainParticipant:
         config = cyclone_config()
         domain = Domain(did, config) if config else None
         _participants[did] = (domain, DomainParticipant(did))
+        _dds_write_set_batch(True)  # applies to the domain just created, before any writer
     return _participants[did][1]
+
+
+class _FlushQueue:
+    """Writers that wrote during the current executor turn, flushed when the turn ends.
+
+    Outside a turn (node construction, shutdown, another thread) a write is flushed at once.
+    """
+
+    def __init__(self) -> None:
+        self.turn_thread: int | None = None
+        self.dirty: dict[int, str] = {}  # writer handle -> topic, in first-write order
+
+    def wrote(self, writer_ref: int, topic: str) -> None:
+        if self.turn_thread == threading.get_ident():
+            self.dirty.setdefault(writer_ref, topic)
+        else:
+            _flush(writer_ref, topic)
+
+    def flush(self) -> None:
+        dirty, self.dirty = self.dirty, {}
+        for writer_ref, topic in dirty.items():
+            _flush(writer_ref, topic)
+
+
+def _flush(writer_ref: int, topic: str) -> None:
+    ret = _dds_write_flush(writer_ref)
+    if ret < 0:
+        raise DDSException(ret, f"flushing the writer of {topic}")
 
 
 @dataclass
@@ -140,20 +183,21 @@ class DdsPublisher:
     topic: str
     type_name: str
     writer: DataWriter
+    flush_queue: _FlushQueue
 
     def publish(self, msg: Any) -> None:
         data = serialize(msg)
         pad = (-len(data)) % 4
         if pad:
             data += b"\0" * pad
-        ret = ddspy_write(self.writer._ref, data)
-        if ret < 0:
-            raise DDSException(ret, f"writing {self.type_name} on {self.topic}")
+        self.publish_raw(data)
 
     def publish_raw(self, data: bytes) -> None:
-        ret = ddspy_write(self.writer._ref, data)
+        ref = self.writer._ref
+        ret = ddspy_write(ref, data)
         if ret < 0:
             raise DDSException(ret, f"writing {self.type_name} on {self.topic}")
+        self.flush_queue.wrote(ref, self.topic)
 
     def subscription_count(self) -> int:
         return len(self.writer.get_matched_subscriptions())
@@ -216,6 +260,7 @@ class DdsBackend:
         self._subscriptions: list[DdsSubscription] = []
         self._publishers: list[DdsPublisher] = []
         self._timers: list[DdsTimer] = []
+        self._flush_queue = _FlushQueue()
         self._waitset = WaitSet(self.participant)
         self._guard = GuardCondition(self.participant)
         self._waitset.attach(self._guard)
@@ -233,7 +278,7 @@ class DdsBackend:
         writer = DataWriter(
             self.participant, self._topic(topic, type_name), dds_qos(qos, type_name)
         )
-        pub = DdsPublisher(topic, type_name, writer)
+        pub = DdsPublisher(topic, type_name, writer, self._flush_queue)
         self._publishers.append(pub)
         return pub
 
@@ -269,6 +314,14 @@ class DdsBackend:
         self._guard.set(True)
 
     def spin_once(self, timeout_s: float) -> None:
+        self._flush_queue.turn_thread = threading.get_ident()
+        try:
+            self._turn(timeout_s)
+        finally:
+            self._flush_queue.turn_thread = None
+            self._flush_queue.flush()
+
+    def _turn(self, timeout_s: float) -> None:
         now = time.monotonic_ns()
         timeout_ns = int(timeout_s * 1e9)
         self._timers = [t for t in self._timers if not t.cancelled]
@@ -283,6 +336,7 @@ class DdsBackend:
             for sub in self._subscriptions:
                 if sub.drain() >= _TAKE_BATCH:
                     busy = True
+            self._flush_queue.flush()  # what this round produced goes downstream now
             if time.monotonic_ns() - now > 20_000_000:
                 break  # let due timers run
         now = time.monotonic_ns()

@@ -1,9 +1,12 @@
 """Nodes in separate processes on the Cyclone DDS backend (ROS 2 wire format, loopback)."""
 
 import json
+import threading
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-from rig_runtime.testing import Processes, graph_env, wait_for
+from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 
 
 def _listener_args(result: Path, **params: object) -> list[str]:
@@ -70,3 +73,49 @@ def test_sensor_qos_pubsub(tmp_path: Path) -> None:
     # Best effort may drop under load; on loopback at 200 Hz nearly everything arrives.
     assert summary["received"] >= 380
     assert summary["out_of_order"] == 0
+
+
+def _publish_then_idle(
+    tmp_path: Path, monkeypatch: Any, publish: Callable[[Any, Any], None]
+) -> None:
+    """A listener process must receive 5 samples this process writes and then never spins for."""
+    from rig_runtime import Node
+    from rig_runtime.demo_nodes import make_message
+
+    result = tmp_path / "listener.json"
+    env = graph_env()
+    join_graph(env, monkeypatch.setenv)
+    with Processes(env, log_dir=tmp_path) as procs:
+        listener = procs.start_entry(
+            "rig_runtime", "listener", *_listener_args(result, count=5, qos="stream")
+        )
+        node = Node("batch_talker", [], [])
+        try:
+            pub = node.create_publisher("sensor_msgs/msg/JointState", "/chatter", qos="stream")
+            assert node.spin_until(lambda: pub.subscription_count() > 0, 30)
+            publish(node, lambda seq: pub.publish(make_message(node, "joint_state", seq)))
+            # No spinning from here on: whatever was not flushed would never leave.
+            assert wait_for(lambda: listener.poll() is not None, 20), procs.log("listener")
+        finally:
+            node.close()
+    assert json.loads(result.read_text())["received"] == 5
+
+
+def test_batched_writes_in_a_turn_leave_when_the_turn_ends(
+    tmp_path: Path, monkeypatch: Any
+) -> None:
+    def in_one_turn(node: Any, send: Callable[[int], None]) -> None:
+        timer = node.create_timer(0.001, lambda: [send(i) for i in range(5)])
+        node.spin_once(1.0)  # the timer fires once inside this turn
+        timer.cancel()
+
+    _publish_then_idle(tmp_path, monkeypatch, in_one_turn)
+
+
+def test_writes_outside_a_turn_leave_at_once(tmp_path: Path, monkeypatch: Any) -> None:
+    def from_a_thread(node: Any, send: Callable[[int], None]) -> None:
+        worker = threading.Thread(target=lambda: [send(i) for i in range(5)])
+        worker.start()
+        worker.join(10)
+
+    _publish_then_idle(tmp_path, monkeypatch, from_a_thread)
