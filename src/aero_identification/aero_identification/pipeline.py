@@ -383,9 +383,7 @@ def _fit_pnlss(
     u_val, y_val = (
         np.stack(
             [
-                getattr(assembler.blocks[(lv, val)], name)[:, vcols[lv]].mean(
-                    axis=1, keepdims=True
-                )
+                getattr(assembler.blocks[(lv, val)], name)[:, vcols[lv]].mean(axis=1, keepdims=True)
                 for lv in levels
             ],
             axis=2,

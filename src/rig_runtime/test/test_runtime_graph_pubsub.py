@@ -6,7 +6,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from rig_runtime.demo_nodes import make_message
 from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
+
+from rig_runtime import Node
 
 
 def _listener_args(result: Path, **params: object) -> list[str]:
@@ -79,9 +82,6 @@ def _publish_then_idle(
     tmp_path: Path, monkeypatch: Any, publish: Callable[[Any, Any], None]
 ) -> None:
     """A listener process must receive 5 samples this process writes and then never spins for."""
-    from rig_runtime import Node
-    from rig_runtime.demo_nodes import make_message
-
     result = tmp_path / "listener.json"
     env = graph_env()
     join_graph(env, monkeypatch.setenv)
