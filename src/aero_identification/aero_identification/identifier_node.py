@@ -29,7 +29,7 @@ from rig_runtime.diagnostics import diagnostic_array
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 
 from .campaign import CampaignAssembler
-from .pipeline import IdentificationConfig, IdentificationResult, identify, write_report
+from .pipeline import IdentificationConfig, IdentificationResult, identify, warm_up, write_report
 
 PARAMETERS = [
     Parameter("output_dir", "", "run directory for models.json and the report ('' = none)"),
@@ -73,11 +73,15 @@ def _refit(
     previous: IdentificationResult | None = None,
 ) -> tuple[IdentificationResult, list[str]]:
     """Worker-process job: identify (or only validate, given models) and, when final, report."""
+    cpu0 = time.process_time()
     release_memory()  # what the previous job freed
     result = identify(assembler, config, final=final, models_from=models_from, previous=previous)
     written: list[str] = []
     if out_dir and final:
+        t0 = time.perf_counter()
         written = [str(p) for p in write_report(result, assembler, out_dir).values()]
+        result.timings_s["report"] = time.perf_counter() - t0
+    result.timings_s["worker_cpu"] = time.process_time() - cpu0
     return result, written
 
 
@@ -118,6 +122,9 @@ class Identifier:
             self.executor = ProcessPoolExecutor(
                 max_workers=1, mp_context=multiprocessing.get_context("spawn")
             )
+            # Start the worker now: its imports and compiled kernels load while the first
+            # realization streams in, not inside the first refit. A failure shows at the refit.
+            self.executor.submit(warm_up)
         self.model_pub = node.create_publisher(
             "std_msgs/msg/String", "/identification/model", "latched"
         )
@@ -275,7 +282,11 @@ class Identifier:
             self.node.new_message("std_msgs/msg/String", data=json.dumps(payload, allow_nan=True))
         )
         self.node.logger.info(
-            "refit %d done in %.2f s; %d warning(s)", self.refits, elapsed, len(result.warnings)
+            "refit %d done in %.2f s (identification %s); %d warning(s)",
+            self.refits,
+            elapsed,
+            ", ".join(f"{k} {v:.2f} s" for k, v in result.timings_s.items()),
+            len(result.warnings),
         )
         for warning in result.warnings:
             self.node.logger.warning("%s", warning)

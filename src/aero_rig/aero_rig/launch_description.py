@@ -61,6 +61,7 @@ _NODE_KEYS = {
     "parameter_overrides",
     "remappings",
     "stops_graph",
+    "nice",
 }
 
 
@@ -80,6 +81,7 @@ class LaunchNode:
     overrides: dict[str, Any] = field(default_factory=dict)
     remappings: tuple[tuple[str, str], ...] = ()
     stops_graph: bool = False
+    nice: int = 0
 
     @property
     def fq_name(self) -> str:
@@ -144,6 +146,9 @@ def graph_nodes(document: dict[str, Any], base_dir: Path) -> list[LaunchNode]:
                 raise GraphFileError(f"{where}: '{key}' (a non-empty string) is required")
         if any(n.name == item["name"] for n in nodes):
             raise GraphFileError(f"{where}: duplicate node name {item['name']!r}")
+        nice = item.get("nice", 0)
+        if isinstance(nice, bool) or not isinstance(nice, int) or not 0 <= nice <= 19:
+            raise GraphFileError(f"{where} ({item['name']}): 'nice' must be an integer 0..19")
         files = []
         for text in item.get("parameters") or []:
             path = resolve_file(str(text), base_dir)
@@ -162,6 +167,7 @@ def graph_nodes(document: dict[str, Any], base_dir: Path) -> list[LaunchNode]:
                     (str(k), str(v)) for k, v in (item.get("remappings") or {}).items()
                 ),
                 stops_graph=bool(item.get("stops_graph", False)),
+                nice=nice,
             )
         )
     return nodes
@@ -248,6 +254,7 @@ def graph_actions(document: dict[str, Any], base_dir: Path, run_dir: str) -> lis
                 remappings=list(node.remappings),
                 output="screen",
                 on_exit=stop_on_exit(node),
+                **({"prefix": f"nice -n {node.nice}"} if node.nice else {}),
             )
         )
     topics = recorded_topics(nodes)

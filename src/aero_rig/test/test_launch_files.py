@@ -339,3 +339,14 @@ def test_launch_module_imports_no_middleware_and_no_rerun() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60
     )
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+@pytest.mark.usefixtures("ros_stubs")
+@pytest.mark.parametrize(("launch_file", "graph"), LAUNCH_FILES.items())
+def test_nice_becomes_a_nice_prefix(launch_file: str, graph: str, tmp_path: Path) -> None:
+    nodes = _nodes(_launch(launch_file, run_dir=str(tmp_path / "run")))
+    spec = load_graph(CONFIG / graph)
+    assert any(n.nice for n in spec.nodes)  # both shipped graphs set priorities
+    for expected in spec.nodes:
+        prefix = nodes[expected.name].kwargs.get("prefix")
+        assert prefix == (f"nice -n {expected.nice}" if expected.nice else None)

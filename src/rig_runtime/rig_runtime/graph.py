@@ -13,6 +13,7 @@ A graph YAML (read by the launcher here and by the ROS launch files in aero_rig)
         parameter_overrides: {real_time_factor: 0.0}
         remappings: {/pitch/command: /pitch/command}
         stops_graph: false            # true: when it exits (even with 0), the graph stops
+        nice: 0                       # lower the CPU priority by 0..19, as `nice -n`
 
 A node that exits non-zero always stops the graph.
 """
@@ -39,6 +40,7 @@ class NodeSpec:
     parameter_overrides: dict[str, Any] = field(default_factory=dict)
     remappings: dict[str, str] = field(default_factory=dict)
     stops_graph: bool = False
+    nice: int = 0
 
     def ros_arguments(self, extra_overrides: dict[str, Any] | None = None) -> list[str]:
         """The ``--ros-args`` section ``ros2 run`` would pass for this node."""
@@ -150,6 +152,7 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
             "parameter_overrides",
             "remappings",
             "stops_graph",
+            "nice",
         }
         if unknown:
             raise GraphError(f"{where}: unknown keys {sorted(unknown)}")
@@ -159,6 +162,9 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
         if item["name"] in seen:
             raise GraphError(f"{where}: duplicate node name {item['name']!r}")
         seen.add(item["name"])
+        nice = item.get("nice", 0)
+        if isinstance(nice, bool) or not isinstance(nice, int) or not 0 <= nice <= 19:
+            raise GraphError(f"{where} ({item['name']}): 'nice' must be an integer 0..19")
         params = tuple(resolve_path(str(p), base) for p in item.get("parameters") or [])
         for p in params:
             if not p.exists():
@@ -173,6 +179,7 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
                 parameter_overrides=dict(item.get("parameter_overrides") or {}),
                 remappings={str(k): str(v) for k, v in (item.get("remappings") or {}).items()},
                 stops_graph=bool(item.get("stops_graph", False)),
+                nice=nice,
             )
         )
     return GraphSpec(name=str(document.get("name", "graph")), nodes=tuple(nodes), source=source)

@@ -77,6 +77,12 @@ class Launcher:
                 stderr=subprocess.STDOUT if stdout else None,
                 start_new_session=True,
             )
+            if spec.nice:  # relative to the launcher's own, like `nice -n` in the launch files
+                try:
+                    niceness = min(19, os.getpriority(os.PRIO_PROCESS, 0) + spec.nice)
+                    os.setpriority(os.PRIO_PROCESS, process.pid, niceness)
+                except OSError:
+                    pass  # the process already exited: poll() reports it
             self.processes.append(NodeProcess(spec, process))
 
     def poll(self) -> str | None:

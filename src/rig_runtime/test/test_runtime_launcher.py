@@ -118,3 +118,28 @@ def _unknown_exe(tmp_path: Path) -> Path:
     path = tmp_path / "unknown.yaml"
     path.write_text("nodes:\n  - {name: a, package: rig_runtime, executable: nope}\n")
     return path
+
+
+def test_nice_lowers_a_node_priority(tmp_path: Path) -> None:
+    import pytest
+    from rig_runtime.graph import GraphError
+
+    graph = yaml.safe_load(_graph(tmp_path, 0, tmp_path / "listener.json").read_text())
+    graph["nodes"][0]["nice"] = 7  # the listener
+    graph["nodes"][1]["parameter_overrides"]["linger_s"] = 30.0
+    path = tmp_path / "nice.yaml"
+    path.write_text(yaml.safe_dump(graph))
+    proc = _launch(path, "--duration", "30")
+    try:
+        assert wait_for(lambda: len(_descendants(proc.pid)) >= 2, 20)
+        nice = {" ".join(c.cmdline()): c.nice() for c in _descendants(proc.pid)}
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    base = os.nice(0)
+    assert sorted(nice.values()) == [base, min(19, base + 7)], nice
+    assert [v for k, v in nice.items() if "__node:=listener" in k] == [min(19, base + 7)]
+    graph["nodes"][0]["nice"] = 20
+    path.write_text(yaml.safe_dump(graph))
+    with pytest.raises(GraphError, match=r"'nice' must be an integer 0\.\.19"):
+        load_graph(path)
