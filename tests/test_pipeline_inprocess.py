@@ -84,3 +84,26 @@ def test_refits_reuse_unchanged_models_exactly(campaign) -> None:
     assert (
         validated.errors_all == first.errors_all and validated.errors_level1 == first.errors_level1
     )
+
+
+def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) -> None:
+    plan, stamps, u, y = campaign
+    sine = next(s for s in plan["segments"] if s["kind"] == "sine")
+    half = sine["start_k"] + sine["length"] // 2
+    asm = CampaignAssembler(plan, T0)
+    asm.add_many("u", stamps[:half], u[:half])
+    asm.add_many("y", stamps[:half], y[:half])
+    config = IdentificationConfig(max_iter=2)
+    interim = identify(asm, config)
+    assert not any("incomplete record" in w for w in interim.warnings), interim.warnings
+    final = identify(asm, config, final=True, models_from=interim)
+    assert any(f"sine {sine['frequency_hz']:g} Hz" in w for w in final.warnings), final.warnings
+    # A gap in a record whose last sample is in is a fault at once.
+    end = sine["start_k"] + sine["length"]
+    gap = np.ones(end, dtype=bool)
+    gap[sine["start_k"] + 5] = False
+    asm = CampaignAssembler(plan, T0)
+    asm.add_many("u", stamps[:end][gap], u[:end][gap])
+    asm.add_many("y", stamps[:end], y[:end])
+    gapped = identify(asm, config)
+    assert any("incomplete record" in w for w in gapped.warnings), gapped.warnings

@@ -64,6 +64,25 @@ def release_memory() -> None:
         pass
 
 
+def _status_mb(field: str) -> float:
+    """A /proc/self/status memory figure (VmRSS, VmHWM) in MB; NaN where there is none."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return math.nan
+
+
+def _reset_peak_rss() -> None:
+    """Restart VmHWM (the peak resident size) from the current size (Linux clear_refs 5)."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        pass
+
+
 def _refit(
     assembler: CampaignAssembler,
     config: IdentificationConfig,
@@ -71,18 +90,24 @@ def _refit(
     out_dir: str,
     models_from: IdentificationResult | None = None,
     previous: IdentificationResult | None = None,
-) -> tuple[IdentificationResult, list[str]]:
-    """Worker-process job: identify (or only validate, given models) and, when final, report."""
+) -> tuple[IdentificationResult, list[str], dict[str, float]]:
+    """Worker-process job: identify (or only validate, given models) and, when final, report.
+
+    Also returns the job's worker CPU seconds, resident size at its start and peak [MB].
+    """
     cpu0 = time.process_time()
     release_memory()  # what the previous job freed
+    _reset_peak_rss()
+    stats = {"start_mb": _status_mb("VmRSS")}
     result = identify(assembler, config, final=final, models_from=models_from, previous=previous)
     written: list[str] = []
     if out_dir and final:
         t0 = time.perf_counter()
         written = [str(p) for p in write_report(result, assembler, out_dir).values()]
         result.timings_s["report"] = time.perf_counter() - t0
-    result.timings_s["worker_cpu"] = time.process_time() - cpu0
-    return result, written
+    stats["peak_mb"] = _status_mb("VmHWM")
+    stats["cpu_s"] = time.process_time() - cpu0
+    return result, written, stats
 
 
 class Identifier:
@@ -108,7 +133,7 @@ class Identifier:
         # (needed k, final, reason, new multisine data: the models must be refitted)
         self.pending: list[tuple[int, bool, str, bool]] = []
         self.models_stale = True
-        self.future: Future[tuple[IdentificationResult, list[str]]] | None = None
+        self.future: Future[tuple[IdentificationResult, list[str], dict[str, float]]] | None = None
         self.future_reason = ""
         self.refit_started = 0.0
         self.refits = 0
@@ -249,7 +274,7 @@ class Identifier:
         if self.executor is not None:
             self.future = self.executor.submit(_refit, *args)
         else:
-            done: Future[tuple[IdentificationResult, list[str]]] = Future()
+            done: Future[tuple[IdentificationResult, list[str], dict[str, float]]] = Future()
             try:
                 done.set_result(_refit(*args))
             except Exception as exc:
@@ -260,7 +285,7 @@ class Identifier:
         assert self.future is not None
         elapsed = time.monotonic() - self.refit_started
         try:
-            result, written = self.future.result()
+            result, written, stats = self.future.result()
         except Exception as exc:
             detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
             self.errors.append(f"refit failed ({self.future_reason}): {detail}")
@@ -282,10 +307,14 @@ class Identifier:
             self.node.new_message("std_msgs/msg/String", data=json.dumps(payload, allow_nan=True))
         )
         self.node.logger.info(
-            "refit %d done in %.2f s (identification %s); %d warning(s)",
+            "refit %d done in %.2f s (%s; worker CPU %.2f s, resident %.0f MB at start, "
+            "peak %.0f MB); %d warning(s)",
             self.refits,
             elapsed,
             ", ".join(f"{k} {v:.2f} s" for k, v in result.timings_s.items()),
+            stats["cpu_s"],
+            stats["start_mb"],
+            stats["peak_mb"],
             len(result.warnings),
         )
         for warning in result.warnings:

@@ -485,7 +485,10 @@ def _validate_on_sines(
 ) -> None:
     for rec in sorted(assembler.sines.values(), key=lambda r: r.index):
         if not rec.valid():
-            if np.any(rec.count_u) or np.any(rec.count_y):
+            # Still streaming (its last sample not in yet) is no fault until the final refit.
+            in_progress = not (rec.count_u[-1] and rec.count_y[-1])
+            started = np.any(rec.count_u) or np.any(rec.count_y)
+            if started and (result.complete or not in_progress):
                 result.warnings.append(
                     f"sine {rec.frequency_hz:g} Hz at {rec.offset_deg:g}°: incomplete record, "
                     "not used for validation"

@@ -69,13 +69,15 @@ class Launcher:
                 self._logs.append(log)
                 stdout = log
             # Own process group: a terminal's Ctrl-C reaches the launcher only, which then
-            # stops the nodes in order instead of all of them racing.
+            # stops the nodes in order instead of all of them racing. The same session, though:
+            # with the kernel's autogroup scheduling every session is one scheduling entity,
+            # and a node's `nice` would have no effect against nodes in other sessions.
             process = subprocess.Popen(
                 cmd,
                 env=self.env,
                 stdout=stdout,
                 stderr=subprocess.STDOUT if stdout else None,
-                start_new_session=True,
+                process_group=0,
             )
             if spec.nice:  # relative to the launcher's own, like `nice -n` in the launch files
                 try:
