@@ -107,3 +107,42 @@ def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) ->
     asm.add_many("y", stamps[:end], y[:end])
     gapped = identify(asm, config)
     assert any("incomplete record" in w for w in gapped.warnings), gapped.warnings
+
+
+def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -> None:
+    """The refit worker killed mid-job: the error is reported, the previous models are kept,
+    a new worker is started, and the next refit (a full one) succeeds."""
+    import os
+    import signal
+
+    from aero_identification.identifier_node import PARAMETERS, Identifier
+    from rig_runtime.testing import graph_env, join_graph, wait_for
+
+    from rig_runtime import Node
+
+    join_graph(graph_env(), monkeypatch.setenv)
+    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3"], backend="dds")
+    ident = Identifier(node)
+    try:
+        ident.assembler = _assemble(campaign)
+        ident._start_refit(False, "first")
+        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
+        ident._collect()
+        assert ident.refits == 1 and not ident.errors
+        ident.models_stale = False  # a sine-only refit: the worker's kept models are reused
+        ident._start_refit(False, "second")
+        assert ident.executor is not None
+        (pid,) = [p.pid for p in ident.executor._processes.values()]
+        os.kill(pid, signal.SIGKILL)
+        assert wait_for(lambda: ident.future is not None and ident.future.done(), 60)
+        ident._collect()
+        assert ident.refits == 1 and "refit failed (second)" in ident.errors[-1]
+        assert ident.models_stale  # the new worker has no models: the next refit is full
+        ident._start_refit(True, "third")
+        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
+        ident._collect()
+        assert ident.refits == 2 and ident.final_done
+        assert ident.last_summary is not None and ident.last_summary["complete"]
+    finally:
+        ident.close()
+        node.close()

@@ -1,12 +1,30 @@
 """Identification of lift dynamics: BLA, period clustering, frequency-domain subspace, PNLSS;
-identifier node and offline fits."""
+identifier node and offline fits.
 
-from aero_identification.bla import BLA, estimate_bla
-from aero_identification.clustering import ClusterResult, cluster_periods, period_clusters
-from aero_identification.data import PeriodicData, transient_periods
-from aero_identification.metrics import predict_bla_sine, relative_rms_error
-from aero_identification.pnlss import LMIteration, PNLSSModel, fit_pnlss
-from aero_identification.subspace import LinearStateSpace, fit_linear_ss
+The names below load their module on first use (PEP 562), so importing a light module of the
+package (campaign, refit_worker: what the identifier node needs) does not load scipy,
+scikit-learn and numba.
+"""
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "BLA": "bla",
+    "estimate_bla": "bla",
+    "ClusterResult": "clustering",
+    "cluster_periods": "clustering",
+    "period_clusters": "clustering",
+    "PeriodicData": "data",
+    "transient_periods": "data",
+    "predict_bla_sine": "metrics",
+    "relative_rms_error": "metrics",
+    "LMIteration": "pnlss",
+    "PNLSSModel": "pnlss",
+    "fit_pnlss": "pnlss",
+    "LinearStateSpace": "subspace",
+    "fit_linear_ss": "subspace",
+}
 
 __all__ = [
     "BLA",
@@ -24,3 +42,16 @@ __all__ = [
     "relative_rms_error",
     "transient_periods",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'aero_identification' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"aero_identification.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -12,8 +12,6 @@ and the report (Table 1 Markdown/CSV, PNG figures) to ``output_dir`` and, with
 ``exit_after_final``, exits (the campaign's end).
 """
 
-import ctypes
-import gc
 import json
 import math
 import multiprocessing
@@ -21,6 +19,7 @@ import sys
 import time
 import traceback
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +27,10 @@ from rig_runtime.diagnostics import diagnostic_array
 
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 
+from . import refit_worker
 from .campaign import CampaignAssembler
-from .pipeline import IdentificationConfig, IdentificationResult, identify, warm_up, write_report
+
+RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
 
 PARAMETERS = [
     Parameter("output_dir", "", "run directory for models.json and the report ('' = none)"),
@@ -51,78 +52,20 @@ PARAMETERS = [
 ]
 
 
-def release_memory() -> None:
-    """Collect garbage and hand freed heap back to the OS (glibc keeps it otherwise).
-
-    A refit allocates and frees hundreds of MB; without the trim the worker's and the node's
-    resident size ratchets up from refit to refit although nothing is kept.
-    """
-    gc.collect()
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc: nothing to trim
-        pass
-
-
-def _status_mb(field: str) -> float:
-    """A /proc/self/status memory figure (VmRSS, VmHWM) in MB; NaN where there is none."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return math.nan
-
-
-def _reset_peak_rss() -> None:
-    """Restart VmHWM (the peak resident size) from the current size (Linux clear_refs 5)."""
-    try:
-        Path("/proc/self/clear_refs").write_text("5")
-    except OSError:
-        pass
-
-
-def _refit(
-    assembler: CampaignAssembler,
-    config: IdentificationConfig,
-    final: bool,
-    out_dir: str,
-    models_from: IdentificationResult | None = None,
-    previous: IdentificationResult | None = None,
-) -> tuple[IdentificationResult, list[str], dict[str, float]]:
-    """Worker-process job: identify (or only validate, given models) and, when final, report.
-
-    Also returns the job's worker CPU seconds, resident size at its start and peak [MB].
-    """
-    cpu0 = time.process_time()
-    release_memory()  # what the previous job freed
-    _reset_peak_rss()
-    stats = {"start_mb": _status_mb("VmRSS")}
-    result = identify(assembler, config, final=final, models_from=models_from, previous=previous)
-    written: list[str] = []
-    if out_dir and final:
-        t0 = time.perf_counter()
-        written = [str(p) for p in write_report(result, assembler, out_dir).values()]
-        result.timings_s["report"] = time.perf_counter() - t0
-    stats["peak_mb"] = _status_mb("VmHWM")
-    stats["cpu_s"] = time.process_time() - cpu0
-    return result, written, stats
-
-
 class Identifier:
     def __init__(self, node: Node) -> None:
         p = node.params
         self.node = node
-        self.config = IdentificationConfig(
-            nx=p["nx"],
-            degrees=tuple(p["degrees"]),
-            structure=p["structure"],
-            max_iter=p["max_iter"],
-            estimation_realization=p["estimation_realization"],
-            validation_realization=p["validation_realization"],
-        )
-        if self.config.estimation_realization == self.config.validation_realization:
+        # IdentificationConfig fields (built in the worker: this process stays light).
+        self.config: dict[str, Any] = {
+            "nx": p["nx"],
+            "degrees": tuple(p["degrees"]),
+            "structure": p["structure"],
+            "max_iter": p["max_iter"],
+            "estimation_realization": p["estimation_realization"],
+            "validation_realization": p["validation_realization"],
+        }
+        if p["estimation_realization"] == p["validation_realization"]:
             raise ValueError(
                 "parameters 'estimation_realization' and 'validation_realization' must differ"
             )
@@ -133,23 +76,18 @@ class Identifier:
         # (needed k, final, reason, new multisine data: the models must be refitted)
         self.pending: list[tuple[int, bool, str, bool]] = []
         self.models_stale = True
-        self.future: Future[tuple[IdentificationResult, list[str], dict[str, float]]] | None = None
+        self.future: Future[RefitOutcome] | None = None
         self.future_reason = ""
         self.refit_started = 0.0
         self.refits = 0
         self.refit_times: list[float] = []
-        self.last_result: IdentificationResult | None = None
+        self.last_summary: dict[str, Any] | None = None
         self.errors: list[str] = []
         self.final_done = False
         self.samples = {"u": 0, "y": 0}
         self.executor: ProcessPoolExecutor | None = None
         if p["use_worker"]:
-            self.executor = ProcessPoolExecutor(
-                max_workers=1, mp_context=multiprocessing.get_context("spawn")
-            )
-            # Start the worker now: its imports and compiled kernels load while the first
-            # realization streams in, not inside the first refit. A failure shows at the refit.
-            self.executor.submit(warm_up)
+            self._start_worker()
         self.model_pub = node.create_publisher(
             "std_msgs/msg/String", "/identification/model", "latched"
         )
@@ -177,6 +115,14 @@ class Identifier:
         node.create_timer(0.1, self.on_timer)
         node.create_timer(1.0, self.publish_status)
         self.publish_status()
+
+    def _start_worker(self) -> None:
+        self.executor = ProcessPoolExecutor(
+            max_workers=1, mp_context=multiprocessing.get_context("spawn")
+        )
+        # Start the worker now: its imports and compiled kernels load while the first
+        # realization streams in, not inside the first refit. A failure shows at the refit.
+        self.executor.submit(refit_worker.warm_up)
 
     # -- intake ---------------------------------------------------------------------------
     def on_plan(self, msg: Any) -> None:
@@ -261,22 +207,23 @@ class Identifier:
         assert self.assembler is not None
         self.refit_started = time.monotonic()
         self.future_reason = reason
-        # Only sines completed since the last refit: keep the models, validate them again.
-        reuse = None if self.models_stale or self.last_result is None else self.last_result
+        # Only sines completed since the last refit: the worker keeps its models and validates
+        # them again.
+        reuse = not self.models_stale and self.refits > 0
         self.node.logger.info(
             "%s %d (%s)%s",
-            "validation" if reuse is not None else "refit",
+            "validation" if reuse else "refit",
             self.refits + 1,
             reason,
             " [final]" if final else "",
         )
-        args = (self.assembler, self.config, final, self.out_dir, reuse, self.last_result)
+        args = (self.assembler, self.config, final, self.out_dir, reuse)
         if self.executor is not None:
-            self.future = self.executor.submit(_refit, *args)
+            self.future = self.executor.submit(refit_worker.refit, *args)
         else:
-            done: Future[tuple[IdentificationResult, list[str], dict[str, float]]] = Future()
+            done: Future[RefitOutcome] = Future()
             try:
-                done.set_result(_refit(*args))
+                done.set_result(refit_worker.refit(*args))
             except Exception as exc:
                 done.set_exception(exc)
             self.future = done
@@ -285,49 +232,55 @@ class Identifier:
         assert self.future is not None
         elapsed = time.monotonic() - self.refit_started
         try:
-            result, written, stats = self.future.result()
+            payload, summary = self.future.result()
         except Exception as exc:
             detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
             self.errors.append(f"refit failed ({self.future_reason}): {detail}")
             self.node.logger.error("%s; the previous models are kept", self.errors[-1])
             self.future = None
+            if isinstance(exc, BrokenProcessPool) and self.executor is not None:
+                # The worker died (killed, out of memory): a new one, which fits afresh.
+                self.executor.shutdown(wait=False, cancel_futures=True)
+                self._start_worker()
+                self.models_stale = True
             self.publish_status()
             return
         self.future = None
         self.models_stale = False
         self.refits += 1
-        release_memory()
         self.refit_times.append(elapsed)
-        self.last_result = result
-        payload = result.to_json_dict()
+        self.last_summary = summary
+        refit_worker.release_memory()  # the pickled job and its answer
         payload["refit"] = self.refits
         payload["refit_s"] = elapsed
         payload["reason"] = self.future_reason
         self.model_pub.publish(
             self.node.new_message("std_msgs/msg/String", data=json.dumps(payload, allow_nan=True))
         )
+        worker = summary["worker"]
         self.node.logger.info(
             "refit %d done in %.2f s (%s; worker CPU %.2f s, resident %.0f MB at start, "
-            "peak %.0f MB); %d warning(s)",
+            "peak %.0f MB; node %.0f MB); %d warning(s)",
             self.refits,
             elapsed,
-            ", ".join(f"{k} {v:.2f} s" for k, v in result.timings_s.items()),
-            stats["cpu_s"],
-            stats["start_mb"],
-            stats["peak_mb"],
-            len(result.warnings),
+            ", ".join(f"{k} {v:.2f} s" for k, v in summary["timings_s"].items()),
+            worker["cpu_s"],
+            worker["start_mb"],
+            worker["peak_mb"],
+            refit_worker.status_mb("VmRSS"),
+            len(summary["warnings"]),
         )
-        for warning in result.warnings:
+        for warning in summary["warnings"]:
             self.node.logger.warning("%s", warning)
-        if result.complete:
+        if summary["complete"]:
             self.final_done = True
-            if written:
+            if summary["written"]:
                 self.node.logger.info("report written to %s", Path(self.out_dir).resolve())
             self.node.logger.info(
-                "final Table 1 (trained on all levels):\n%s", result.tables()["all_levels"][0]
+                "final Table 1 (trained on all levels):\n%s", payload["table1"]["markdown"]
             )
         self.publish_status()
-        if result.complete and self.node.params["exit_after_final"]:
+        if summary["complete"] and self.node.params["exit_after_final"]:
             self.node.request_shutdown(0)
 
     # -- status ---------------------------------------------------------------------------
@@ -345,18 +298,17 @@ class Identifier:
                 valid = int(block.period_valid().sum())
                 values[f"level {level} realization {real} valid periods"] = f"{valid}/{block.P}"
         excluded: list[str] = []
-        if self.last_result is not None:
-            for lv in self.last_result.levels.values():
-                if lv.clusters is not None:
-                    values[f"{lv.name} clusters"] = (
-                        f"k={lv.clusters.k}, sizes={list(map(int, lv.clusters.sizes))}"
-                    )
-                excluded += [f"{lv.name}: {e}" for e in lv.excluded]
+        if self.last_summary is not None:
+            for lv in self.last_summary["levels"]:
+                if lv["clusters"] is not None:
+                    k, sizes = lv["clusters"]
+                    values[f"{lv['name']} clusters"] = f"k={k}, sizes={sizes}"
+                excluded += [f"{lv['name']}: {e}" for e in lv["excluded"]]
         if excluded:
             values["excluded periods"] = "; ".join(excluded)
         if self.errors:
             values["errors"] = "; ".join(self.errors[-3:])
-        warnings = self.last_result.warnings if self.last_result else []
+        warnings = self.last_summary["warnings"] if self.last_summary else []
         if warnings:
             values["warnings"] = "; ".join(warnings)
         level = 2 if self.errors else (1 if excluded or warnings else 0)
