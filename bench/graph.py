@@ -11,11 +11,13 @@ sample (same stamp): end-to-end latency p50/p99.
     .venv/bin/python bench/graph.py [--plan short] [--latency-seconds 20]
 
 Last line: JSON with real_time_factor, wall_s, samples, samples_lost, latency_p50_ms,
-latency_p99_ms, refit_s (list), max_refit_s, node_cpu_s, node_peak_mb.
+latency_p99_ms, refit_s (list), max_refit_s, node_cpu_s, node_peak_mb, refit_memory_mb (per
+refit: identifier node, worker at the job's start, worker peak), identifier_mb_by_quarter.
 """
 
 import argparse
 import json
+import re
 import sys
 import tempfile
 import time
@@ -91,10 +93,14 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
             stamps[conn.topic].add(stamp_to_ns(reader.deserialize(raw, conn.msgtype).header.stamp))
     models = json.loads((run_dir / "models.json").read_text())
     status_refits = []
+    refit_memory = []
     log = (run_dir / "logs" / "identifier.log").read_text(errors="replace")
     for line in log.splitlines():
         if "done in" in line and "refit" in line:
             status_refits.append(float(line.split("done in")[1].split("s")[0]))
+            memory = re.search(r"resident (\d+) MB at start, peak (\d+) MB; node (\d+) MB", line)
+            if memory:  # [node, worker at the job's start, worker peak] in MB
+                refit_memory.append([int(memory[3]), int(memory[1]), int(memory[2])])
     experiment_s = monitor.total / 200.0
     return {
         "wall_s": round(wall, 2),
@@ -106,8 +112,10 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
         "max_refit_s": max(status_refits) if status_refits else None,
         "node_cpu_s": {k: round(v, 1) for k, v in cpu.items()},
         "node_peak_mb": {k: round(v, 1) for k, v in peaks.items()},
-        # Largest identifier memory (node + refit worker) in each quarter of the run: the
-        # worker process starts at the first refit; flat afterwards means bounded buffers.
+        # Per refit, from the identifier's log: [node resident size after the refit, worker
+        # resident size at the job's start (its input included), worker peak during the job].
+        "refit_memory_mb": refit_memory,
+        # Largest identifier memory (node + refit worker) in each quarter of the run.
         "identifier_mb_by_quarter": [
             round(float(np.max(q)), 1) for q in np.array_split(trace.get("identifier", [0.0]), 4)
         ],
@@ -182,6 +190,10 @@ def main() -> int:
     print(f"refits: {figures['refit_s']} s")
     print(f"cpu per node [s]: {figures['node_cpu_s']}")
     print(f"peak memory per node [MB]: {figures['node_peak_mb']}")
+    print(
+        "identifier memory per refit [MB] (node, worker at start, worker peak): "
+        f"{figures['refit_memory_mb']}"
+    )
     print(
         f"latency /pitch/command -> /wing/coefficients at real time: p50 "
         f"{figures['latency_p50_ms']} ms, p99 {figures['latency_p99_ms']} ms "

@@ -6,29 +6,15 @@ import numpy as np
 import pytest
 from aero_identification.campaign import CampaignAssembler
 from aero_identification.pipeline import IdentificationConfig, identify
+from aero_rig.simulation import T0_NS as T0
+from aero_rig.simulation import simulate_plan
 from multisine_gen.plan import short_plan
-from pitch_actuator.dynamics import ActuatorModel
-from pressure_scanner.integration import PressureIntegrator
-from pressure_scanner.plant import WingPlant
-
-T0 = 1_700_000_000_000_000_000
 
 
 @pytest.fixture(scope="module")
 def campaign() -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
-    plan = short_plan(seed=0)
-    command = np.radians(plan.command_deg())
-    actuator = ActuatorModel(fs=plan.fs, seed=0)
-    pitch = np.empty(len(command))
-    alpha = np.empty(len(command))
-    for k, c in enumerate(command):
-        sample = actuator.step(c)
-        pitch[k], alpha[k] = sample.position_rad, sample.alpha_true_rad
-    plant = WingPlant(seed=0)
-    pressures, _ = plant.simulate(alpha)
-    cl = PressureIntegrator(plant.taps).integrate(pressures, pitch, plant.dynamic_pressure_pa).cl
-    stamps = T0 + np.round(np.arange(len(command)) * 1e9 / plan.fs).astype(np.int64)
-    return json.loads(plan.to_json()), stamps, np.degrees(pitch), cl
+    run = simulate_plan(short_plan(seed=0), seed=0)
+    return run.plan, run.stamps_ns, run.pitch_deg, run.cl
 
 
 def _assemble(campaign, drop: int | None = None, duplicate: int | None = None) -> CampaignAssembler:
