@@ -215,3 +215,56 @@ def test_killing_the_identifier_stops_the_campaign_with_a_clear_error(tmp_path: 
     assert re.search(r"node 'identifier' exited with code -9", err), err
     with AnyReader([run / "bag"]) as reader:  # the bag up to the failure is readable
         assert reader.message_count > 0
+
+
+def test_sigterm_stops_the_campaign_and_every_node_and_keeps_the_bag(tmp_path: Path) -> None:
+    """A job scheduler's `kill`: the graph is stopped like on Ctrl-C, nothing is left running."""
+    import psutil
+
+    run = tmp_path / "run"
+    proc = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", "short"),
+            *("--out", str(run), "--quiet", "--real-time-factor", "5"),
+        ],
+        env=graph_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    nodes: list[psutil.Process] = []
+    try:
+
+        def descendants() -> list[psutil.Process]:
+            try:
+                return psutil.Process(proc.pid).children(recursive=True)
+            except psutil.Error:
+                return []
+
+        assert wait_for(
+            lambda: len(descendants()) >= 6 and (run / "bag" / "metadata.yaml").exists(), 60
+        )
+        time.sleep(2.0)
+        nodes = descendants()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        for p in [*nodes, *([psutil.Process(proc.pid)] if proc.poll() is None else [])]:
+            try:
+                p.kill()
+            except psutil.Error:
+                pass
+        proc.wait(timeout=30)
+
+    def gone(p: psutil.Process) -> bool:
+        try:
+            return not p.is_running() or p.status() == psutil.STATUS_ZOMBIE
+        except psutil.Error:
+            return True
+
+    assert proc.returncode == 1
+    assert "campaign failed: stopped by SIGTERM" in err, err
+    assert wait_for(lambda: all(gone(p) for p in nodes), 30), [p.cmdline() for p in nodes]
+    with AnyReader([run / "bag"]) as reader:  # finalised by the recorder on its SIGINT
+        assert reader.message_count > 0

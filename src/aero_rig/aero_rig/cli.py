@@ -15,6 +15,7 @@ and the run directory (bag, models, report, .rrd).
 import argparse
 import json
 import os
+import signal
 import sys
 import time
 from datetime import datetime
@@ -127,6 +128,15 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     launcher = Launcher(graph, env=env, overrides=overrides, log_dir=run_dir / "logs")
     monitor = CampaignMonitor()
     started = time.monotonic()
+    stopped_by: list[str] = []
+
+    def _on_signal(signum: int, _frame: Any) -> None:
+        # kill, a job scheduler's time limit or a closed terminal: stop the graph as Ctrl-C does
+        # (the nodes are in their own process groups and would otherwise run on).
+        stopped_by.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
+    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGHUP)}
     launcher.start()
     reason: str | None = None
     progress = tqdm(total=1, unit="sample", unit_scale=True, desc="experiment", disable=args.quiet)
@@ -144,11 +154,18 @@ def cmd_campaign(args: argparse.Namespace) -> int:
                 launcher.failure = reason
     except KeyboardInterrupt:
         reason = "interrupted"
-        launcher.failure = "interrupted by the user"
+        launcher.failure = (
+            f"stopped by {stopped_by[0]}" if stopped_by else "interrupted by the user"
+        )
     finally:
+        previous[signal.SIGINT] = signal.getsignal(signal.SIGINT)
+        for sig in previous:  # the graph is being stopped (bounded): let that finish
+            signal.signal(sig, signal.SIG_IGN)
         progress.close()
         monitor.close()
         codes = launcher.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     wall = time.monotonic() - started
     if launcher.failure:
         print(f"aero-rig: campaign failed: {launcher.failure}", file=sys.stderr)

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from .graph import GraphError, GraphSpec, NodeSpec, entry_point, load_graph
+from .node import LAUNCHER_PID_ENV
 
 
 @dataclass
@@ -51,7 +52,9 @@ class Launcher:
         grace_s: float = 5.0,
     ) -> None:
         self.graph = graph
-        self.env = {**os.environ, **(env or {})}
+        # RIG_LAUNCHER_PID: a node whose parent is no longer this process stops (Node.spin), so
+        # a launcher killed with SIGKILL leaves no graph running on.
+        self.env = {**os.environ, **(env or {}), LAUNCHER_PID_ENV: str(os.getpid())}
         self.overrides = dict(overrides or {})
         self.log_dir = log_dir
         self.grace_s = grace_s
@@ -140,7 +143,8 @@ class Launcher:
         def _on_signal(signum: int, _frame: Any) -> None:
             stop_reason.append(signal.Signals(signum).name)
 
-        previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        handled = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # SIGHUP: the terminal closed
+        previous = {s: signal.signal(s, _on_signal) for s in handled}
         try:
             self.start()
             deadline = None if duration_s is None else time.monotonic() + duration_s

@@ -30,6 +30,9 @@ from .params import Parameter, ParameterError, ParameterSet, resolve_parameters
 from .qos import QosProfile, resolve_qos
 
 BACKEND_ENV = "RIG_RUNTIME_BACKEND"
+# Set by the launcher for its nodes: a node whose parent process is no longer the launcher
+# (it was killed, even with SIGKILL) stops instead of running on unattended.
+LAUNCHER_PID_ENV = "RIG_LAUNCHER_PID"
 
 # Exit codes: 0 ok, 2 configuration error (bad parameters/arguments), 1 runtime failure.
 EXIT_CONFIG_ERROR = 2
@@ -133,6 +136,12 @@ class Node:
         self._shutdown_requested = False
         self._on_shutdown: list[Callable[[], None]] = []
         self._backend = _make_backend(backend or select_backend_name(), self.name, self.namespace)
+        launcher = os.environ.get(LAUNCHER_PID_ENV, "")
+        # Only a direct child of that launcher watches it (not a process that inherited the
+        # variable further down).
+        self._launcher_pid = int(launcher) if launcher.isdigit() else None
+        if self._launcher_pid != os.getppid():
+            self._launcher_pid = None
 
     @property
     def backend_name(self) -> str:
@@ -201,8 +210,16 @@ class Node:
         self._backend.spin_once(timeout_s)
 
     def spin(self) -> None:
+        next_check = time.monotonic() + 0.5
         while not self._shutdown_requested:
             self._backend.spin_once(0.05)
+            if self._launcher_pid is not None and time.monotonic() >= next_check:
+                next_check = time.monotonic() + 0.5
+                if os.getppid() != self._launcher_pid:
+                    self.logger.error(
+                        "the launcher (pid %d) is gone: shutting down", self._launcher_pid
+                    )
+                    self.request_shutdown(1)
 
     def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Spin until ``predicate()`` is true (returns True) or the timeout passes (False)."""

@@ -134,8 +134,13 @@ def test_nice_lowers_a_node_priority(tmp_path: Path) -> None:
         assert wait_for(lambda: len(_descendants(proc.pid)) >= 2, 20)
         nice = {" ".join(c.cmdline()): c.nice() for c in _descendants(proc.pid)}
     finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=30)
+        proc.send_signal(signal.SIGTERM)  # the launcher stops its nodes
+        try:
+            proc.wait(timeout=30)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=30)
     base = os.nice(0)
     assert sorted(nice.values()) == [base, min(19, base + 7)], nice
     assert [v for k, v in nice.items() if "__node:=listener" in k] == [min(19, base + 7)]
@@ -143,3 +148,34 @@ def test_nice_lowers_a_node_priority(tmp_path: Path) -> None:
     path.write_text(yaml.safe_dump(graph))
     with pytest.raises(GraphError, match=r"'nice' must be an integer 0\.\.19"):
         load_graph(path)
+
+
+def test_nodes_stop_when_the_launcher_is_killed(tmp_path: Path) -> None:
+    graph = yaml.safe_load(_graph(tmp_path, 0, tmp_path / "listener.json").read_text())
+    graph["nodes"][1]["parameter_overrides"].update(count=1_000_000, rate_hz=50.0)
+    path = tmp_path / "orphans.yaml"
+    path.write_text(yaml.safe_dump(graph))
+    proc = _launch(path)
+    children: list[psutil.Process] = []
+    try:
+        assert wait_for(lambda: len(_descendants(proc.pid)) >= 2, 20)
+        time.sleep(3.0)  # both nodes spinning
+        children = _descendants(proc.pid)
+        os.kill(proc.pid, signal.SIGKILL)  # no chance to stop anything
+        proc.wait(timeout=10)
+
+        def gone(p: psutil.Process) -> bool:
+            try:
+                return not p.is_running() or p.status() == psutil.STATUS_ZOMBIE
+            except psutil.Error:
+                return True
+
+        assert wait_for(lambda: all(gone(c) for c in children), 10)
+    finally:
+        for c in children:
+            try:
+                c.kill()
+            except psutil.Error:
+                pass
+    # The listener shut down cleanly (its summary is written on shutdown).
+    assert json.loads((tmp_path / "listener.json").read_text())["received"] > 0
