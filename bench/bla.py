@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from aero_identification.data import random_phase_period
 from scipy.signal import freqz, lfilter
 
 from aero_identification import BLA, PeriodicData, estimate_bla, transient_periods
@@ -37,9 +38,7 @@ def simulate(rng: np.random.Generator, lines: np.ndarray) -> tuple[PeriodicData,
     y = np.empty((N, P, M))
     var_x = 0.0
     for m in range(M):
-        X = np.zeros(N // 2 + 1, complex)
-        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        period = np.fft.irfft(X, N)
+        period = random_phase_period(rng, N, lines)
         record = np.tile(period / period.std(), P)
         x = lfilter(B, A, record)
         var_x += np.var(x[N:]) / M

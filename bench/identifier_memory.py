@@ -26,15 +26,7 @@ from aero_rig.simulation import simulate_plan
 from multisine_gen.plan import default_plan, short_plan
 
 from aero_identification import refit_worker
-
-CONFIG = {
-    "nx": 1,
-    "degrees": (2, 3, 4, 5),
-    "structure": "full",
-    "max_iter": 100,
-    "estimation_realization": 0,
-    "validation_realization": 1,
-}
+from aero_identification.config import IdentificationConfig
 
 
 def refit_points(assembler: CampaignAssembler, plan: dict[str, Any]) -> list[tuple[int, bool, str]]:
@@ -77,7 +69,9 @@ def main() -> int:
                 assembler.add_many(channel, run.stamps_ns[done:end], values[done:end])
             done = end
         job_input = pickle.loads(pickle.dumps(assembler))  # as the worker receives it
-        _, summary = refit_worker.refit(job_input, CONFIG, final, "", reuse_models=reuse)
+        _, summary = refit_worker.refit(
+            job_input, IdentificationConfig(), final, "", reuse_models=reuse
+        )
         del job_input
         worker = summary["worker"]
         rows.append((label, reuse, worker["start_mb"], worker["peak_mb"], worker["cpu_s"]))

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from aero_rig.launch_description import DESIGN_TOPICS
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.testing import graph_env, wait_for
+from rig_runtime.testing import descendants, graph_env, process_gone, wait_for
 from rosbags.highlevel import AnyReader
 
 
@@ -191,7 +191,7 @@ def test_killing_the_identifier_stops_the_campaign_with_a_clear_error(tmp_path: 
     try:
 
         def identifier() -> psutil.Process | None:
-            for child in psutil.Process(proc.pid).children(recursive=True):
+            for child in descendants(proc.pid):
                 try:
                     if "identifier_node" in " ".join(child.cmdline()):
                         return child
@@ -235,18 +235,12 @@ def test_sigterm_stops_the_campaign_and_every_node_and_keeps_the_bag(tmp_path: P
     )
     nodes: list[psutil.Process] = []
     try:
-
-        def descendants() -> list[psutil.Process]:
-            try:
-                return psutil.Process(proc.pid).children(recursive=True)
-            except psutil.Error:
-                return []
-
         assert wait_for(
-            lambda: len(descendants()) >= 6 and (run / "bag" / "metadata.yaml").exists(), 60
+            lambda: len(descendants(proc.pid)) >= 6 and (run / "bag" / "metadata.yaml").exists(),
+            60,
         )
         time.sleep(2.0)
-        nodes = descendants()
+        nodes = descendants(proc.pid)
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
     finally:
@@ -257,14 +251,8 @@ def test_sigterm_stops_the_campaign_and_every_node_and_keeps_the_bag(tmp_path: P
                 pass
         proc.wait(timeout=30)
 
-    def gone(p: psutil.Process) -> bool:
-        try:
-            return not p.is_running() or p.status() == psutil.STATUS_ZOMBIE
-        except psutil.Error:
-            return True
-
     assert proc.returncode == 1
     assert "campaign failed: stopped by SIGTERM" in err, err
-    assert wait_for(lambda: all(gone(p) for p in nodes), 30), [p.cmdline() for p in nodes]
+    assert wait_for(lambda: all(process_gone(p) for p in nodes), 30), [p.cmdline() for p in nodes]
     with AnyReader([run / "bag"]) as reader:  # finalised by the recorder on its SIGINT
         assert reader.message_count > 0

@@ -298,3 +298,12 @@ def transient_periods(data: PeriodicData, n_ref: int = 2, threshold: float = 2.0
         if idx.size:
             n_drop = max(n_drop, int(idx[-1]) + 1)
     return n_drop
+
+
+def random_phase_period(rng: np.random.Generator, N: int, lines: np.ndarray) -> np.ndarray:
+    """One period (N,) of a random-phase multisine: unit amplitude on the DFT bins ``lines``,
+    phases uniform in [0, 2π) drawn from ``rng``, nothing elsewhere (scale it as needed).
+    For test signals and warm-ups; experiment plans come from multisine_gen."""
+    X = np.zeros(N // 2 + 1, complex)
+    X[lines] = np.exp(2j * np.pi * rng.random(len(lines)))
+    return np.fft.irfft(X, N)

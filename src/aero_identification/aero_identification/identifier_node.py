@@ -29,6 +29,7 @@ from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 
 from . import refit_worker
 from .campaign import CampaignAssembler
+from .config import IdentificationConfig
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
 
@@ -56,16 +57,15 @@ class Identifier:
     def __init__(self, node: Node) -> None:
         p = node.params
         self.node = node
-        # IdentificationConfig fields (built in the worker: this process stays light).
-        self.config: dict[str, Any] = {
-            "nx": p["nx"],
-            "degrees": tuple(p["degrees"]),
-            "structure": p["structure"],
-            "max_iter": p["max_iter"],
-            "estimation_realization": p["estimation_realization"],
-            "validation_realization": p["validation_realization"],
-        }
-        if p["estimation_realization"] == p["validation_realization"]:
+        self.config = IdentificationConfig(
+            nx=p["nx"],
+            degrees=tuple(p["degrees"]),
+            structure=p["structure"],
+            max_iter=p["max_iter"],
+            estimation_realization=p["estimation_realization"],
+            validation_realization=p["validation_realization"],
+        )
+        if self.config.estimation_realization == self.config.validation_realization:
             raise ValueError(
                 "parameters 'estimation_realization' and 'validation_realization' must differ"
             )

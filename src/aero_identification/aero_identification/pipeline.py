@@ -29,25 +29,13 @@ import numpy as np
 from .bla import BLA, estimate_bla
 from .campaign import CampaignAssembler, PeriodBlock, SineRecord
 from .clustering import ClusterResult, period_clusters
-from .data import PeriodicData
+from .config import IdentificationConfig
+from .data import PeriodicData, random_phase_period
 from .metrics import predict_bla_sine, relative_rms_error
 from .pnlss import PNLSSModel, fit_pnlss, linear_states, periodic_records
 from .subspace import LinearStateSpace, fit_linear_ss
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
-
-
-@dataclass(frozen=True)
-class IdentificationConfig:
-    """Hyperparameters of the pipeline (the identifier node's parameters)."""
-
-    nx: int = 1  # states of BLA SS and PNLSS (paper: 1)
-    degrees: tuple[int, ...] = (2, 3, 4, 5)  # PNLSS monomial degrees (paper: 2..5)
-    structure: str = "full"
-    max_iter: int = 100  # LM iterations (the paper used 50 for its order scan)
-    estimation_realization: int = 0
-    validation_realization: int = 1
-    min_periods: int = 2
 
 
 @dataclass
@@ -327,9 +315,7 @@ def warm_up() -> float:
     lines = np.arange(1, N // 2, 2)
     u = np.zeros((N, P, M))
     for m in range(M):
-        spectrum = np.zeros(N // 2 + 1, dtype=complex)
-        spectrum[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        u[:, :, m] = np.fft.irfft(spectrum, N)[:, None] * 10.0
+        u[:, :, m] = random_phase_period(rng, N, lines)[:, None] * 10.0
     y = 0.5 * u + 0.01 * np.roll(u, 1, axis=0) + 0.1 * u**2
     data = PeriodicData(u, y + 1e-3 * rng.standard_normal(y.shape), 1.0, lines)
     period_clusters(data)

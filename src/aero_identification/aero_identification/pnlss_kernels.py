@@ -78,6 +78,30 @@ def _max_degree(exp_state: np.ndarray, exp_output: np.ndarray) -> int:
     return d
 
 
+@njit(cache=True, inline="always")
+def _affine_row(M, x, N, u, t, P, m, i) -> float:
+    """Row i of M x + N u[t] + P m: one line of the state or the output equation."""
+    acc = 0.0
+    for j in range(x.shape[0]):
+        acc += M[i, j] * x[j]
+    for j in range(u.shape[1]):
+        acc += N[i, j] * u[t, j]
+    for k in range(m.shape[0]):
+        acc += P[i, k] * m[k]
+    return acc
+
+
+@njit(cache=True, inline="always")
+def _next_state(A, B, E, x, u, t, zeta, bound, xn) -> bool:
+    """xn = A x + B u[t] + E ζ; False when a state leaves [-bound, bound] or is not finite."""
+    ok = True
+    for i in range(x.shape[0]):
+        xn[i] = _affine_row(A, x, B, u, t, E, zeta, i)
+        if not abs(xn[i]) <= bound:  # also true for NaN
+            ok = False
+    return ok
+
+
 @njit(cache=True)
 def _simulate_one(A, B, C, D, E, F, exp_state, exp_output, u, x0, bound, y) -> int:
     """Simulate one record into y (T, ny); returns the number of valid samples.
@@ -107,27 +131,8 @@ def _simulate_one(A, B, C, D, E, F, exp_state, exp_output, u, x0, bound, y) -> i
         _monomials(pw, exp_output, eta)
         _monomials(pw, exp_state, zeta)
         for i in range(ny):
-            acc = 0.0
-            for j in range(nx):
-                acc += C[i, j] * x[j]
-            for j in range(nu):
-                acc += D[i, j] * u[t, j]
-            for k in range(Ke):
-                acc += F[i, k] * eta[k]
-            y[t, i] = acc
-        ok = True
-        for i in range(nx):
-            acc = 0.0
-            for j in range(nx):
-                acc += A[i, j] * x[j]
-            for j in range(nu):
-                acc += B[i, j] * u[t, j]
-            for k in range(Kz):
-                acc += E[i, k] * zeta[k]
-            xn[i] = acc
-            if not abs(acc) <= bound:  # also true for NaN
-                ok = False
-        if not ok:
+            y[t, i] = _affine_row(C, x, D, u, t, F, eta, i)
+        if not _next_state(A, B, E, x, u, t, zeta, bound, xn):
             y[t + 1 :, :] = np.nan
             return t + 1
         for i in range(nx):
@@ -246,19 +251,7 @@ def _jacobian_one(A, B, C, D, E, F, exp_state, exp_output, u, y_meas, n_skip, of
                 Sn[i, b0 + i * nu + j] += u[t, j]
             for k in range(Kz):
                 Sn[i, e0 + i * Kz + k] += zeta[k]
-        ok = True
-        for i in range(nx):
-            acc = 0.0
-            for j in range(nx):
-                acc += A[i, j] * x[j]
-            for j in range(nu):
-                acc += B[i, j] * u[t, j]
-            for k in range(Kz):
-                acc += E[i, k] * zeta[k]
-            xn[i] = acc
-            if not abs(acc) <= bound:
-                ok = False
-        if not ok:
+        if not _next_state(A, B, E, x, u, t, zeta, bound, xn):
             return False
         for i in range(nx):
             x[i] = xn[i]

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .campaign import CampaignAssembler
+from .config import IdentificationConfig
 
 _kept: dict[str, Any] = {}  # "last": the latest IdentificationResult of this process
 
@@ -63,7 +64,7 @@ def warm_up() -> float:
 
 def refit(
     assembler: CampaignAssembler,
-    config: dict[str, Any],
+    config: IdentificationConfig,
     final: bool,
     out_dir: str,
     reuse_models: bool,
@@ -72,7 +73,6 @@ def refit(
     final, write the report to ``out_dir``.
 
     Args:
-        config: IdentificationConfig fields.
         reuse_models: only sine records completed since the last job: the multisine data, hence
             the models, are unchanged (a new worker without kept models fits them afresh, which
             gives the same models).
@@ -82,7 +82,7 @@ def refit(
         and {complete, warnings, levels: [{name, clusters: [k, sizes] | None, excluded}],
         written (report files), timings_s, worker: {cpu_s, start_mb, peak_mb}}.
     """
-    from .pipeline import IdentificationConfig, identify, write_report
+    from .pipeline import identify, write_report
 
     cpu0 = time.process_time()
     release_memory()  # what the previous job freed
@@ -91,7 +91,7 @@ def refit(
     last = _kept.get("last")
     result = identify(
         assembler,
-        IdentificationConfig(**config),
+        config,
         final=final,
         models_from=last if reuse_models else None,
         previous=last,

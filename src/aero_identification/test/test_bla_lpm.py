@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from aero_identification.data import random_phase_period
 from aero_identification.lpm import lpm_periodic
 from scipy.signal import freqz, lfilter
 
@@ -20,9 +21,7 @@ def transient_record(rng: np.random.Generator, lines: np.ndarray, M: int, sigma:
     u = np.empty((N, P, M))
     y = np.empty((N, P, M))
     for m in range(M):
-        X = np.zeros(N // 2 + 1, complex)
-        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        period = np.fft.irfft(X, N)
+        period = random_phase_period(rng, N, lines)
         record = np.tile(period / period.std(), P)
         out = lfilter(B, A, record) + sigma * rng.standard_normal(N * P)
         u[:, :, m] = record.reshape(P, N).T

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from aero_identification.data import random_phase_period
 from aero_identification.metrics import interpolate_frf
 from scipy.signal import freqz, lfilter
 
@@ -36,9 +37,7 @@ def multisine_bla(rng: np.random.Generator, sigma: float) -> BLA:
     u = np.empty((N, P, M))
     y = np.empty((N, P, M))
     for m in range(M):
-        X = np.zeros(N // 2 + 1, complex)
-        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        period = np.fft.irfft(X, N)
+        period = random_phase_period(rng, N, lines)
         record = np.tile(period / period.std(), P + 1)
         out = lfilter(B, A, record)[N:] + sigma * rng.standard_normal(N * P)
         u[:, :, m] = record[N:].reshape(P, N).T

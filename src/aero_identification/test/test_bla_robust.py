@@ -5,6 +5,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 from aero_identification.bla import detection_lines
+from aero_identification.data import random_phase_period
 from scipy.signal import freqz, lfilter
 
 from aero_identification import BLA, PeriodicData, estimate_bla
@@ -33,9 +34,7 @@ def simulate(
     u = np.empty((N, P, M))
     y = np.empty((N, P, M))
     for m in range(M):
-        X = np.zeros(N // 2 + 1, complex)
-        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        period = np.fft.irfft(X, N)
+        period = random_phase_period(rng, N, lines)
         period /= period.std()
         record = np.tile(period, P + 2)
         out = static(lfilter(B, A, record))[2 * N :]  # discard two periods of transient

@@ -2,6 +2,7 @@
 
 import numpy as np
 from aero_identification.clustering import period_clusters
+from aero_identification.data import random_phase_period
 
 from aero_identification import PeriodicData, cluster_periods
 
@@ -16,9 +17,7 @@ def regime_data(
     u = np.empty((N, P, M))
     y = np.empty((N, P, M))
     for m in range(M):
-        X = np.zeros(N // 2 + 1, complex)
-        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        alpha = np.fft.irfft(X, N)
+        alpha = random_phase_period(rng, N, lines)
         alpha /= alpha.std()
         for p in range(P):
             if (p, m) in other_regime:

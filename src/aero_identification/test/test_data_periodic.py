@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from aero_identification.data import transient_ratio
+from aero_identification.data import random_phase_period, transient_ratio
 from scipy.signal import lfilter
 
 from aero_identification import PeriodicData, transient_periods
@@ -70,9 +70,7 @@ def test_transient_check_finds_leading_transient_period() -> None:
     y_steady = np.empty((N, P, M))
     b, a = [0.1], [1.0, -0.97]  # time constant ≈ 33 samples: transient dies in period 0
     for m in range(M):
-        X = np.zeros(N // 2 + 1, complex)
-        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        period = np.fft.irfft(X, N)
+        period = random_phase_period(rng, N, lines)
         record = np.tile(period / period.std(), P + 1)
         out = lfilter(b, a, record)
         noise = 0.01 * rng.standard_normal(N * P)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from aero_identification.data import random_phase_period
 from aero_identification.report import (
     plot_cl_alpha,
     plot_clusters,
@@ -70,9 +71,7 @@ def small_bla() -> tuple[PeriodicData, BLA]:
     lines = np.array([1, 3, 7, 9, 11, 15])
     u = np.empty((N, P, M))
     for m in range(M):
-        X = np.zeros(N // 2 + 1, complex)
-        X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
-        u[:, :, m] = np.fft.irfft(X, N)[:, None]
+        u[:, :, m] = random_phase_period(rng, N, lines)[:, None]
     y = 0.5 * u + 0.2 * u**2 + 0.01 * rng.standard_normal(u.shape)
     data = PeriodicData(u, y, 20.0, lines)
     return data, estimate_bla(data)

@@ -151,34 +151,28 @@ def participant() -> DomainParticipant:
 
 
 class _FlushQueue:
-    """Writers that wrote during the current executor turn, flushed when the turn ends.
+    """Publishers that wrote during the current executor turn, flushed when the turn ends.
 
     Outside a turn (node construction, shutdown, another thread) a write is flushed at once.
     """
 
     def __init__(self) -> None:
         self.turn_thread: int | None = None
-        self.dirty: dict[int, str] = {}  # writer handle -> topic, in first-write order
+        self.dirty: set[DdsPublisher] = set()
 
-    def wrote(self, writer_ref: int, topic: str) -> None:
+    def wrote(self, pub: "DdsPublisher") -> None:
         if self.turn_thread == threading.get_ident():
-            self.dirty.setdefault(writer_ref, topic)
+            self.dirty.add(pub)
         else:
-            _flush(writer_ref, topic)
+            pub.flush()
 
     def flush(self) -> None:
-        dirty, self.dirty = self.dirty, {}
-        for writer_ref, topic in dirty.items():
-            _flush(writer_ref, topic)
+        dirty, self.dirty = self.dirty, set()
+        for pub in dirty:
+            pub.flush()
 
 
-def _flush(writer_ref: int, topic: str) -> None:
-    ret = _dds_write_flush(writer_ref)
-    if ret < 0:
-        raise DDSException(ret, f"flushing the writer of {topic}")
-
-
-@dataclass
+@dataclass(eq=False)  # hashable by identity: a member of the flush queue's set
 class DdsPublisher:
     topic: str
     type_name: str
@@ -193,11 +187,16 @@ class DdsPublisher:
         self.publish_raw(data)
 
     def publish_raw(self, data: bytes) -> None:
-        ref = self.writer._ref
-        ret = ddspy_write(ref, data)
+        ret = ddspy_write(self.writer._ref, data)
         if ret < 0:
             raise DDSException(ret, f"writing {self.type_name} on {self.topic}")
-        self.flush_queue.wrote(ref, self.topic)
+        self.flush_queue.wrote(self)
+
+    def flush(self) -> None:
+        """Send what this writer has queued (write batching)."""
+        ret = _dds_write_flush(self.writer._ref)
+        if ret < 0:
+            raise DDSException(ret, f"flushing the writer of {self.topic}")
 
     def subscription_count(self) -> int:
         return len(self.writer.get_matched_subscriptions())

@@ -136,12 +136,11 @@ class Node:
         self._shutdown_requested = False
         self._on_shutdown: list[Callable[[], None]] = []
         self._backend = _make_backend(backend or select_backend_name(), self.name, self.namespace)
-        launcher = os.environ.get(LAUNCHER_PID_ENV, "")
         # Only a direct child of that launcher watches it (not a process that inherited the
         # variable further down).
-        self._launcher_pid = int(launcher) if launcher.isdigit() else None
-        if self._launcher_pid != os.getppid():
-            self._launcher_pid = None
+        launcher = os.environ.get(LAUNCHER_PID_ENV, "")
+        watched = launcher.isdigit() and int(launcher) == os.getppid()
+        self._launcher_pid = int(launcher) if watched else None
 
     @property
     def backend_name(self) -> str:

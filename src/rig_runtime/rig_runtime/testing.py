@@ -47,6 +47,26 @@ def join_graph(env: dict[str, str], setenv: Callable[[str, str], None] | None = 
         (setenv or os.environ.__setitem__)(key, env[key])
 
 
+def descendants(pid: int) -> list[Any]:
+    """Every live descendant process of ``pid`` (psutil.Process), [] once it is gone."""
+    import psutil
+
+    try:
+        return psutil.Process(pid).children(recursive=True)
+    except psutil.Error:
+        return []
+
+
+def process_gone(proc: Any) -> bool:
+    """Whether a psutil.Process has exited (a zombie waiting to be reaped counts as exited)."""
+    import psutil
+
+    try:
+        return not proc.is_running() or proc.status() == psutil.STATUS_ZOMBIE
+    except psutil.Error:
+        return True
+
+
 def wait_for(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.05) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

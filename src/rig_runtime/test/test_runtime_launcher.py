@@ -11,7 +11,7 @@ from pathlib import Path
 import psutil
 import yaml
 from rig_runtime.graph import load_graph
-from rig_runtime.testing import graph_env, wait_for
+from rig_runtime.testing import descendants, graph_env, process_gone, wait_for
 
 
 def _graph(tmp_path: Path, talker_exit: int, listener_result: Path) -> Path:
@@ -52,13 +52,6 @@ def _launch(graph: Path, *extra: str) -> subprocess.Popen[str]:
     )
 
 
-def _descendants(pid: int) -> list[psutil.Process]:
-    try:
-        return psutil.Process(pid).children(recursive=True)
-    except psutil.NoSuchProcess:
-        return []
-
-
 def test_crashing_node_stops_graph_nonzero_naming_it(tmp_path: Path) -> None:
     result = tmp_path / "listener.json"
     proc = _launch(_graph(tmp_path, 3, result))
@@ -78,8 +71,8 @@ def test_duration_and_sigterm_reap_every_child(tmp_path: Path) -> None:
     graph = _graph(tmp_path, 0, result)
     proc = _launch(graph, "--duration", "30")
     try:
-        assert wait_for(lambda: len(_descendants(proc.pid)) >= 2, 20)
-        children = _descendants(proc.pid)
+        assert wait_for(lambda: len(descendants(proc.pid)) >= 2, 20)
+        children = descendants(proc.pid)
         time.sleep(1.0)
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=30)
@@ -87,7 +80,7 @@ def test_duration_and_sigterm_reap_every_child(tmp_path: Path) -> None:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode == 0, proc.stderr.read() if proc.stderr else ""
-    assert all(not c.is_running() or c.status() == psutil.STATUS_ZOMBIE for c in children)
+    assert all(process_gone(c) for c in children)
 
 
 def test_graph_description_errors(tmp_path: Path) -> None:
@@ -131,8 +124,8 @@ def test_nice_lowers_a_node_priority(tmp_path: Path) -> None:
     path.write_text(yaml.safe_dump(graph))
     proc = _launch(path, "--duration", "30")
     try:
-        assert wait_for(lambda: len(_descendants(proc.pid)) >= 2, 20)
-        nice = {" ".join(c.cmdline()): c.nice() for c in _descendants(proc.pid)}
+        assert wait_for(lambda: len(descendants(proc.pid)) >= 2, 20)
+        nice = {" ".join(c.cmdline()): c.nice() for c in descendants(proc.pid)}
     finally:
         proc.send_signal(signal.SIGTERM)  # the launcher stops its nodes
         try:
@@ -158,19 +151,12 @@ def test_nodes_stop_when_the_launcher_is_killed(tmp_path: Path) -> None:
     proc = _launch(path)
     children: list[psutil.Process] = []
     try:
-        assert wait_for(lambda: len(_descendants(proc.pid)) >= 2, 20)
+        assert wait_for(lambda: len(descendants(proc.pid)) >= 2, 20)
         time.sleep(3.0)  # both nodes spinning
-        children = _descendants(proc.pid)
+        children = descendants(proc.pid)
         os.kill(proc.pid, signal.SIGKILL)  # no chance to stop anything
         proc.wait(timeout=10)
-
-        def gone(p: psutil.Process) -> bool:
-            try:
-                return not p.is_running() or p.status() == psutil.STATUS_ZOMBIE
-            except psutil.Error:
-                return True
-
-        assert wait_for(lambda: all(gone(c) for c in children), 10)
+        assert wait_for(lambda: all(process_gone(c) for c in children), 10)
     finally:
         for c in children:
             try:
