@@ -54,7 +54,7 @@ import scipy.linalg
 from aero_identification.data import PeriodicData
 from aero_identification.monomials import STRUCTURES, check_degrees, structure_exponents
 from aero_identification.pnlss_kernels import jacobian_records, simulate_records
-from aero_identification.subspace import LinearStateSpace, _as_input
+from aero_identification.subspace import LinearStateSpace, StateSpaceDimensions, _as_input
 
 try:  # a dependency of scikit-learn; optional here
     from threadpoolctl import ThreadpoolController
@@ -102,7 +102,7 @@ class LMIteration:
 
 
 @dataclass(eq=False)
-class PNLSSModel:
+class PNLSSModel(StateSpaceDimensions):
     """A PNLSS model in normalised coordinates (module docstring).
 
     Attributes:
@@ -168,18 +168,6 @@ class PNLSSModel:
             setattr(self, name, v)
         self.fs = float(self.fs)
         self.degrees = tuple(int(d) for d in self.degrees)
-
-    @property
-    def nx(self) -> int:
-        return int(self.A.shape[0])
-
-    @property
-    def nu(self) -> int:
-        return int(self.B.shape[1])
-
-    @property
-    def ny(self) -> int:
-        return int(self.C.shape[0])
 
     @property
     def parameters(self) -> np.ndarray:

@@ -25,7 +25,7 @@ them from the training data with `with_operating_point` before simulating absolu
 """
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -39,8 +39,28 @@ from aero_identification.bla import BLA
 MAX_POLE_RADIUS = 0.9999
 
 
+class StateSpaceDimensions:
+    """nx, nu, ny of a model with A (nx, nx), B (nx, nu) and C (ny, nx) attributes."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+
+    @property
+    def nx(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def nu(self) -> int:
+        return int(self.B.shape[1])
+
+    @property
+    def ny(self) -> int:
+        return int(self.C.shape[0])
+
+
 @dataclass(eq=False)
-class LinearStateSpace:
+class LinearStateSpace(StateSpaceDimensions):
     """Discrete-time linear state-space model x(t+1) = A x + B u, y = C x + D u.
 
     Attributes:
@@ -49,7 +69,6 @@ class LinearStateSpace:
         C: (ny, nx) output matrix.
         D: (ny, nu) feed-through.
         fs: sampling frequency [Hz]; z = exp(j2π f/fs).
-        order: nx.
         r: block rows used by the subspace step (0 if not from subspace).
         cost: variance-weighted cost Σ|G_model − G|²/var on the data it was selected on (the
             BLA, or the validation BLA when one was given).
@@ -64,7 +83,6 @@ class LinearStateSpace:
     C: np.ndarray
     D: np.ndarray
     fs: float
-    order: int
     r: int = 0
     cost: float = float("nan")
     u_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -88,20 +106,12 @@ class LinearStateSpace:
             raise ValueError(f"D must have shape (ny, nu)={(ny, nu)}; got {self.D.shape}")
         self.u_mean = _operating_point(self.u_mean, nu, "u_mean")
         self.y_mean = _operating_point(self.y_mean, ny, "y_mean")
-        self.order = nx
         self.fs = float(self.fs)
 
     @property
-    def nx(self) -> int:
-        return int(self.A.shape[0])
-
-    @property
-    def nu(self) -> int:
-        return int(self.B.shape[1])
-
-    @property
-    def ny(self) -> int:
-        return int(self.C.shape[0])
+    def order(self) -> int:
+        """The model order nx."""
+        return self.nx
 
     def poles(self) -> np.ndarray:
         """(nx,) complex eigenvalues of A (discrete-time poles)."""
@@ -113,10 +123,9 @@ class LinearStateSpace:
 
     def with_operating_point(self, u_mean: Any, y_mean: Any) -> "LinearStateSpace":
         """Copy of the model with the operating point (e.g. training-data means) set."""
-        return LinearStateSpace(
-            A=self.A.copy(), B=self.B.copy(), C=self.C.copy(), D=self.D.copy(), fs=self.fs,
-            order=self.order, r=self.r, cost=self.cost, u_mean=np.atleast_1d(u_mean),
-            y_mean=np.atleast_1d(y_mean), refined=self.refined, weighting=self.weighting,
+        return replace(
+            self, A=self.A.copy(), B=self.B.copy(), C=self.C.copy(), D=self.D.copy(),
+            u_mean=np.atleast_1d(u_mean), y_mean=np.atleast_1d(y_mean),
         )  # fmt: skip
 
     def frf(self, freq_hz: np.ndarray) -> np.ndarray:
@@ -184,7 +193,7 @@ class LinearStateSpace:
             B=np.asarray(d["B"], dtype=float).reshape(len(d["A"]), -1),
             C=np.asarray(d["C"], dtype=float).reshape(-1, len(d["A"])),
             D=np.asarray(d["D"], dtype=float),
-            fs=d["fs"], order=d["order"], r=d["r"],
+            fs=d["fs"], r=d["r"],
             cost=float("nan") if d["cost"] is None else d["cost"],
             u_mean=np.asarray(d["u_mean"]), y_mean=np.asarray(d["y_mean"]),
             refined=d["refined"], weighting=d["weighting"],
@@ -600,7 +609,7 @@ def fit_linear_ss(
         S = selection_cost(A, B, C, D, V)
         cost = S if validation is not None else V
         model = LinearStateSpace(
-            A=A, B=B, C=C, D=D, fs=bla.fs, order=n, r=r, cost=cost, refined=refined,
+            A=A, B=B, C=C, D=D, fs=bla.fs, r=r, cost=cost, refined=refined,
             weighting=used,
         )  # fmt: skip
         if best is None or S < best[0]:

@@ -147,7 +147,7 @@ def two_realization_bla(poles: list[complex], seed: int) -> BLA:
         Uk = np.zeros(N // 2 + 1, complex)
         Uk[LINES] = np.exp(2j * np.pi * rng.random(LINES.size))
         u = np.fft.irfft(Uk, n=N)
-        model = LinearStateSpace(A=A, B=B, C=C, D=D, fs=200.0, order=len(poles))
+        model = LinearStateSpace(A=A, B=B, C=C, D=D, fs=200.0)
         y = model.simulate(np.tile(u, P + 2))[2 * N :].reshape(P, N)
         y = y + 0.05 * np.std(y) * rng.standard_normal(y.shape)
         G_p = np.fft.rfft(y, axis=1)[:, LINES] / np.fft.rfft(u)[LINES]
