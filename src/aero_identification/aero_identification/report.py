@@ -143,24 +143,11 @@ def plot_output_spectrum(
     fig = Figure(figsize=(7, 4), layout="constrained")
     ax = fig.subplots()
     ax.plot(bla.freq, _db_amplitude(bla.excited_level), "k.", ms=4, label="excited")
-    ax.plot(
-        bla.odd_freq,
-        _db_amplitude(bla.odd_nl_level),
-        "o",
-        color="tab:red",
-        ms=3,
-        mfc="none",
-        label="odd detection",
-    )
-    ax.plot(
-        bla.even_freq,
-        _db_amplitude(bla.even_nl_level),
-        "s",
-        color="tab:blue",
-        ms=3,
-        mfc="none",
-        label="even",
-    )
+    for freq, level, marker, color, label in (
+        (bla.odd_freq, bla.odd_nl_level, "o", "tab:red", "odd detection"),
+        (bla.even_freq, bla.even_nl_level, "s", "tab:blue", "even"),
+    ):
+        ax.plot(freq, _db_amplitude(level), marker, color=color, ms=3, mfc="none", label=label)
     ax.plot(bla.noise_freq, _db_amplitude(bla.noise_level), "-", color="0.5", lw=1, label="noise σ")
     return _finish(fig, ax, path, "frequency [Hz]", ylabel, title)
 

@@ -96,6 +96,17 @@ def _db(values: np.ndarray, power: bool) -> np.ndarray:
     return out
 
 
+def json_object(text: str, topic: str) -> dict[str, Any]:
+    """The JSON object a std_msgs/String of ``topic`` carries; ValueError naming the topic."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{topic}: not JSON ({exc})") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{topic}: expected a JSON object")
+    return value
+
+
 def finite_runs(x: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
     """(n, 2) strips of the consecutive finite (x, y) points (a NaN breaks the line)."""
     ok = np.isfinite(x) & np.isfinite(y)
@@ -367,12 +378,7 @@ class RigViewLogger:
 
     def on_segment(self, msg: Any) -> None:
         self.counts["segment"] += 1
-        try:
-            event = json.loads(msg.data)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"/experiment/segment: not JSON ({exc})") from None
-        if not isinstance(event, dict):
-            raise ValueError("/experiment/segment: expected a JSON object")
+        event = json_object(msg.data, "/experiment/segment")
         edge = event.get("event", "?")
         stamp_key = {"start": "start_stamp_s", "end": "end_stamp_s"}.get(edge)
         t_ns = None
@@ -401,12 +407,7 @@ class RigViewLogger:
 
     def on_model(self, msg: Any) -> None:
         self.counts["model"] += 1
-        try:
-            model = json.loads(msg.data)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"/identification/model: not JSON ({exc})") from None
-        if not isinstance(model, dict):
-            raise ValueError("/identification/model: expected a JSON object")
+        model = json_object(msg.data, "/identification/model")
         stamp = model.get("stamp_ns")
         self._set_time(int(stamp) if isinstance(stamp, int | float) else None)
         levels = model.get("levels") or {}

@@ -40,6 +40,7 @@ LISTENER_PARAMETERS = [
 ]
 
 TAP_COUNT = 49
+MESSAGE_TYPES = {"joint_state": "sensor_msgs/msg/JointState", "taps": "sensor_msgs/msg/PointCloud2"}
 
 
 def make_message(node: Node, kind: str, seq: int) -> Any:
@@ -79,11 +80,7 @@ class Talker:
         self.node = node
         p = node.params
         self.kind = p["message"]
-        type_name = (
-            "sensor_msgs/msg/JointState"
-            if self.kind == "joint_state"
-            else "sensor_msgs/msg/PointCloud2"
-        )
+        type_name = MESSAGE_TYPES[self.kind]
         self.pub = node.create_publisher(type_name, p["topic"], qos=p["qos"])
         self.sent = 0
         self.done_at: float | None = None
@@ -113,11 +110,7 @@ class Listener:
         self.node = node
         p = node.params
         self.kind = p["message"]
-        type_name = (
-            "sensor_msgs/msg/JointState"
-            if self.kind == "joint_state"
-            else "sensor_msgs/msg/PointCloud2"
-        )
+        type_name = MESSAGE_TYPES[self.kind]
         self.received = 0
         self.out_of_order = 0
         self.last = -1
