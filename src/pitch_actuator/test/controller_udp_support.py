@@ -8,7 +8,6 @@ import random
 import select
 import socket
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -16,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pitch_actuator.controller_protocol import seq_delta, unpack
+from rig_runtime.testing import start_port_printer
 
 TO_SERVER = "to_server"
 TO_CLIENT = "to_client"
@@ -178,26 +178,9 @@ def start_sim_controller(
     args: list[str], stderr_path: Path, timeout_s: float = 30.0
 ) -> tuple[subprocess.Popen[str], int]:
     """Start ``python -m pitch_actuator.sim_controller`` and read the port it prints first."""
-    with open(stderr_path, "w") as stderr:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "pitch_actuator.sim_controller", "--port", "0", *args],
-            stdout=subprocess.PIPE,
-            stderr=stderr,
-            text=True,
-        )
-    try:
-        assert proc.stdout is not None
-        ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
-        line = proc.stdout.readline() if ready else ""
-        if not line.strip().isdigit():
-            raise RuntimeError(
-                f"sim_controller did not print its port within {timeout_s} s "
-                f"(got {line!r}); stderr: {stderr_path.read_text()[-2000:]}"
-            )
-    except BaseException:
-        stop_process(proc)
-        raise
-    return proc, int(line)
+    return start_port_printer(
+        "pitch_actuator.sim_controller", ["--port", "0", *args], stderr_path, timeout_s
+    )
 
 
 def stop_process(proc: subprocess.Popen[str], timeout_s: float = 5.0) -> int:

@@ -5,31 +5,17 @@ name is unique in the repository on purpose.
 """
 
 import json
-import select
 import subprocess
-import sys
 from pathlib import Path
+
+from rig_runtime.testing import start_port_printer
 
 
 def run_sim_scanner(args: list[str], stderr_path: Path, timeout_s: float) -> dict[str, int]:
     """Run ``python -m pressure_scanner.sim_scanner`` to completion (it needs --frames) and
     return its final JSON summary. Kills it if it has not finished within ``timeout_s``."""
-    with open(stderr_path, "w") as stderr:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "pressure_scanner.sim_scanner", *args],
-            stdout=subprocess.PIPE,
-            stderr=stderr,
-            text=True,
-        )
+    proc, _ = start_port_printer("pressure_scanner.sim_scanner", args, stderr_path, timeout_s)
     try:
-        assert proc.stdout is not None
-        ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
-        first = proc.stdout.readline() if ready else ""
-        if not first.strip().isdigit():
-            raise RuntimeError(
-                f"sim_scanner did not start (first line {first!r}); "
-                f"stderr: {stderr_path.read_text()[-2000:]}"
-            )
         try:
             out, _ = proc.communicate(timeout=timeout_s)
         except subprocess.TimeoutExpired:

@@ -7,6 +7,7 @@ exits, whatever happened in the test; every wait is bounded. Each test gets its 
 
 import itertools
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -45,6 +46,38 @@ def join_graph(env: dict[str, str], setenv: Callable[[str, str], None] | None = 
     """
     for key in DDS_KEYS:
         (setenv or os.environ.__setitem__)(key, env[key])
+
+
+def start_port_printer(
+    module: str, args: Sequence[str], stderr_path: Path, timeout_s: float = 30.0
+) -> tuple[subprocess.Popen[str], int]:
+    """Start ``python -m module *args``, a simulated device that prints its UDP port as its
+    first line, and return the process and that port; stdout stays open for the rest.
+
+    Raises RuntimeError (with the end of its stderr) and leaves no process behind if no port
+    comes within ``timeout_s``.
+    """
+    with open(stderr_path, "w") as stderr:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", module, *args], stdout=subprocess.PIPE, stderr=stderr, text=True
+        )
+    try:
+        assert proc.stdout is not None
+        ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
+        line = proc.stdout.readline() if ready else ""
+        if not line.strip().isdigit():
+            raise RuntimeError(
+                f"{module} did not print its port within {timeout_s} s (got {line!r}); "
+                f"stderr: {stderr_path.read_text()[-2000:]}"
+            )
+    except BaseException:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(timeout=5.0)
+        if proc.stdout is not None:
+            proc.stdout.close()
+        raise
+    return proc, int(line)
 
 
 def descendants(pid: int) -> list[Any]:
