@@ -6,6 +6,7 @@ same way on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray).
 """
 
 import math
+from dataclasses import fields
 from typing import Any
 
 from rig_runtime.diagnostics import diagnostic_array
@@ -35,16 +36,8 @@ LIMIT_PARAMETERS = [
 
 
 def limits_from_params(params: Any) -> ActuatorLimits:
-    return ActuatorLimits(
-        min_deg=params["min_deg"],
-        max_deg=params["max_deg"],
-        max_rate_deg_s=params["max_rate_deg_s"],
-        safe_angle_deg=params["safe_angle_deg"],
-        watchdog_timeout_s=params["watchdog_timeout_s"],
-        hold_s=params["hold_s"],
-        ramp_rate_deg_s=params["ramp_rate_deg_s"],
-        limit_approach_s=params["limit_approach_s"],
-    )
+    """The node's limit parameters (LIMIT_PARAMETERS, named as the fields) as ActuatorLimits."""
+    return ActuatorLimits.from_mapping({f.name: params[f.name] for f in fields(ActuatorLimits)})
 
 
 def command_position(msg: Any) -> float:
