@@ -94,13 +94,16 @@ class Identifier:
         self.status_pub = node.create_publisher(
             "diagnostic_msgs/msg/DiagnosticArray", "/identification/status", "latched"
         )
-        node.create_subscription("std_msgs/msg/String", "/experiment/plan", self.on_plan, "latched")
+        node.create_subscription(
+            "std_msgs/msg/String", "/experiment/plan", self.on_plan, "latched", required=True
+        )
         node.create_subscription(
             "sensor_msgs/msg/JointState",
             "/pitch/state",
             self.on_state,
             p["input_qos"],
             depth=None if p["input_qos"] == "stream" else 2000,
+            required=True,
         )
         node.create_subscription(
             "geometry_msgs/msg/Vector3Stamped",
@@ -108,9 +111,10 @@ class Identifier:
             self.on_coefficients,
             p["input_qos"],
             depth=None if p["input_qos"] == "stream" else 2000,
+            required=True,
         )
         node.create_subscription(
-            "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events"
+            "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events", required=True
         )
         node.create_timer(0.1, self.on_timer)
         node.create_timer(1.0, self.publish_status)

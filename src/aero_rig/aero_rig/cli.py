@@ -18,11 +18,12 @@ import os
 import signal
 import sys
 import time
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from rig_runtime.graph import GraphError, GraphSpec, NodeSpec, load_graph, package_share
+from rig_runtime.graph import GraphError, GraphSpec, load_graph, package_share
 from rig_runtime.launcher import Launcher
 
 VIEW_MODES = ("spawn", "save", "serve", "off")  # "off": no view node (the node calls it "none")
@@ -39,15 +40,8 @@ def _with_view(graph: GraphSpec, mode: str, rrd: Path | None) -> GraphSpec:
     overrides = {"mode": mode}
     if rrd is not None:
         overrides["rrd_path"] = str(rrd)
-    view = NodeSpec(
-        view.name,
-        view.package,
-        view.executable,
-        view.namespace,
-        view.parameters,
-        {**view.parameter_overrides, **overrides},
-        view.remappings,
-        False,
+    view = replace(
+        view, parameter_overrides={**view.parameter_overrides, **overrides}, stops_graph=False
     )
     return GraphSpec(graph.name, (*graph.nodes, view), graph.source)
 

@@ -49,6 +49,7 @@ DESIGN_TOPICS = (
     "/wing/coefficients",
     "/experiment/plan",
     "/experiment/segment",
+    "/experiment/anomaly",  # addition: stretches to exclude (rig_runtime/anomaly.py)
     "/identification/status",
     "/identification/model",
 )
@@ -62,7 +63,9 @@ _NODE_KEYS = {
     "remappings",
     "stops_graph",
     "nice",
+    "barrier",
 }
+BARRIER_ROLES = ("lead", "member", "none")  # rig_runtime.graph's start-barrier roles
 
 
 class GraphFileError(ValueError):
@@ -82,6 +85,7 @@ class LaunchNode:
     remappings: tuple[tuple[str, str], ...] = ()
     stops_graph: bool = False
     nice: int = 0
+    barrier: str = "member"
 
     @property
     def fq_name(self) -> str:
@@ -149,6 +153,11 @@ def graph_nodes(document: dict[str, Any], base_dir: Path) -> list[LaunchNode]:
         nice = item.get("nice", 0)
         if isinstance(nice, bool) or not isinstance(nice, int) or not 0 <= nice <= 19:
             raise GraphFileError(f"{where} ({item['name']}): 'nice' must be an integer 0..19")
+        barrier = item.get("barrier", "member")
+        if barrier not in BARRIER_ROLES:
+            raise GraphFileError(
+                f"{where} ({item['name']}): 'barrier' must be one of {', '.join(BARRIER_ROLES)}"
+            )
         files = []
         for text in item.get("parameters") or []:
             path = resolve_file(str(text), base_dir)
@@ -168,8 +177,11 @@ def graph_nodes(document: dict[str, Any], base_dir: Path) -> list[LaunchNode]:
                 ),
                 stops_graph=bool(item.get("stops_graph", False)),
                 nice=nice,
+                barrier=barrier,
             )
         )
+    if sum(n.barrier == "lead" for n in nodes) > 1:
+        raise GraphFileError("more than one node with 'barrier: lead'")
     return nodes
 
 
@@ -235,8 +247,11 @@ def graph_actions(document: dict[str, Any], base_dir: Path, run_dir: str) -> lis
     if sum((n.package, n.executable) == RECORDER for n in nodes) > 1:
         raise GraphFileError("more than one recorder node: they would share one bag")
     actions: list[Any] = []
+    members = [n.fq_name for n in nodes if n.barrier == "member"]
     for node in nodes:
         overrides = dict(node.overrides)
+        if node.barrier == "lead":  # the start barrier waits for every member (as rig-launch)
+            overrides.setdefault("barrier_nodes", members)
         if (node.package, node.executable) == RECORDER:
             overrides["output"] = os.path.join(run_dir, "bag")
         elif (node.package, node.executable) == IDENTIFIER:

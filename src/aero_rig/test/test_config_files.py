@@ -22,7 +22,6 @@ CONFIG = Path(__file__).resolve().parents[1] / "config"
 GRAPHS = ("sim.yaml", "rig.yaml", "live_view.yaml")
 # Values deliberately different from the node's default in the shared files (file, key).
 NOT_DEFAULT = {
-    ("generator.yaml", "wait_for_subscribers"),  # the actuator and the recorder
     ("recorder.yaml", "topics"),  # the DESIGN.md §4 topics instead of everything
     ("view.yaml", "mode"),  # a live view opens a viewer (the node's default only saves)
 }

@@ -6,9 +6,18 @@ event per segment start/end on ``/experiment/segment``. Pacing: the wall clock t
 ``real_time_factor`` (1 on the rig; 0 = as fast as the graph takes). With ``flow_control`` the
 generator never runs more than ``max_lead_samples`` ahead of the last ``/wing/coefficients``
 stamp it has seen, a credit that makes a simulated run lossless and deterministic whatever the
-speed. At the end of the plan it publishes a ``plan_end`` event and keeps the plan latched
-until stopped; stopped early, it publishes ``plan_aborted`` and the actuator's watchdog holds
-and then ramps to the safe angle.
+speed (pacing.py).
+
+Start barrier (rig_runtime.barrier): t0 is taken, and the plan published, only when every node
+named in ``barrier_nodes`` (filled in from the graph description by rig-launch, aero-rig and the
+ROS launch files) has reported ready on ``/graph/ready`` and every reader and writer among them
+is matched on both sides, so the first sample reaches every node and the recorder. A node that
+is not ready after ``start_timeout_s`` stops the generator with an error naming it and what it
+still waits for; nothing has moved then.
+
+At the end of the plan it publishes a ``plan_end`` event and keeps the plan latched until
+stopped; stopped early, it publishes ``plan_aborted`` and the actuator's watchdog holds and then
+ramps to the safe angle.
 """
 
 import json
@@ -17,8 +26,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from rig_runtime.barrier import READY_TOPIC, READY_TYPE, ReadinessReport, StartBarrier
+
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
 
+from .pacing import StreamPacer
 from .plan import ExperimentPlan, PlanLimits, default_plan, short_plan
 
 PARAMETERS = [
@@ -35,12 +47,14 @@ PARAMETERS = [
     Parameter("max_lead_samples", 1000, "most samples ahead of the last coefficients", min=1),
     Parameter("wait_for_subscribers", 1, "command subscribers to wait for before t0", min=0),
     Parameter(
-        "start_delay_s",
-        1.0,
-        "after the subscribers appear, let the rest of the graph finish discovery [s]",
-        min=0.0,
+        "barrier_nodes",
+        [],
+        "nodes that must report ready and matched before t0 (set from the graph description)",
+        element_type=str,
     ),
-    Parameter("start_timeout_s", 60.0, "give up waiting for the graph after this long", min=0.1),
+    Parameter(
+        "start_timeout_s", 60.0, "give up waiting for the barrier after this long [s]", min=0.1
+    ),
     Parameter("exit_at_end", False, "exit after the plan (else keep the plan latched)"),
     Parameter("min_deg", -10.0, "actuator lower limit the plan is checked against [deg]"),
     Parameter("max_deg", 35.0, "actuator upper limit the plan is checked against [deg]"),
@@ -84,19 +98,28 @@ class Generator:
         self.plan_pub = node.create_publisher("std_msgs/msg/String", "/experiment/plan", "latched")
         self.seg_pub = node.create_publisher("std_msgs/msg/String", "/experiment/segment", "events")
         self.k = 0
-        self.k_seen = -1
         self.t0_ns: int | None = None
-        self.wall0 = 0.0
         self.finished = False
         self.created = time.monotonic()
-        self.subscribed_at: float | None = None
+        self.pacer = StreamPacer(
+            self.total,
+            self.fs,
+            real_time_factor=p["real_time_factor"],
+            flow_control=p["flow_control"],
+            max_lead=p["max_lead_samples"],
+        )
+        self.barrier = StartBarrier(p["barrier_nodes"])
+        self.barrier_checked = 0.0
+        self.barrier_logged = time.monotonic()
         if p["flow_control"]:
             node.create_subscription(
                 "geometry_msgs/msg/Vector3Stamped",
                 "/wing/coefficients",
                 self.on_coefficients,
                 "stream",
+                required=True,
             )
+        node.create_subscription(READY_TYPE, READY_TOPIC, self.on_ready, "latched", depth=256)
         node.create_timer(0.002, self.tick)
         node.logger.info(
             "plan %s: %d samples (%.1f s at %g Hz), %d segments",
@@ -110,8 +133,14 @@ class Generator:
     def on_coefficients(self, msg: Any) -> None:
         if self.t0_ns is None:
             return
-        k = round((stamp_to_ns(msg.header.stamp) - self.t0_ns) * self.fs / 1e9)
-        self.k_seen = max(self.k_seen, k)
+        self.pacer.credit(round((stamp_to_ns(msg.header.stamp) - self.t0_ns) * self.fs / 1e9))
+
+    def on_ready(self, msg: Any) -> None:
+        try:
+            self.barrier.update(ReadinessReport.from_json(msg.data))
+        except (ValueError, KeyError) as exc:
+            self.node.logger.warning("ignored a malformed readiness report: %s", exc)
+        self.barrier_checked = 0.0  # look again at the next tick
 
     def stamp_ns(self, k: int) -> int:
         assert self.t0_ns is not None
@@ -120,28 +149,50 @@ class Generator:
     def _event(self, payload: dict[str, Any]) -> None:
         self.seg_pub.publish(self.node.new_message("std_msgs/msg/String", data=json.dumps(payload)))
 
+    def pending(self) -> list[str]:
+        """What the start still waits for (empty: every member ready and matched)."""
+        p = self.node.params
+        waiting = self.barrier.pending(self.node.readiness_report())
+        subscribers = self.cmd_pub.subscription_count()
+        if subscribers < p["wait_for_subscribers"]:
+            waiting.append(
+                f"{self.node.fq_name}: {subscribers} of {p['wait_for_subscribers']} subscribers "
+                "on /pitch/command (is the actuator node running?)"
+            )
+        return waiting
+
     def _start(self) -> bool:
         p = self.node.params
-        if self.cmd_pub.subscription_count() < p["wait_for_subscribers"]:
-            if time.monotonic() - self.created > p["start_timeout_s"]:
+        now = time.monotonic()
+        if now - self.barrier_checked < 0.02:
+            return False
+        self.barrier_checked = now
+        waiting = self.pending()
+        if waiting:
+            if now - self.created > p["start_timeout_s"]:
                 self.node.logger.error(
-                    "no subscriber on /pitch/command after %.0f s: is the actuator node running?",
+                    "start barrier: not ready after %.0f s, nothing was sent: %s",
                     p["start_timeout_s"],
+                    "; ".join(waiting),
                 )
                 self.node.request_shutdown(1)
-            return False
-        if self.subscribed_at is None:
-            self.subscribed_at = time.monotonic()
-        if time.monotonic() - self.subscribed_at < p["start_delay_s"]:
+            elif now - self.barrier_logged > 5.0:
+                self.barrier_logged = now
+                self.node.logger.info("start barrier waits for: %s", "; ".join(waiting))
             return False
         self.t0_ns = time.time_ns()
-        self.wall0 = time.monotonic()
+        self.pacer.start(time.monotonic())
         payload = json.loads(self.plan.to_json())
         payload["t0_ns"] = self.t0_ns
         self.plan_pub.publish(
             self.node.new_message("std_msgs/msg/String", data=json.dumps(payload))
         )
-        self.node.logger.info("t0 = %d ns; streaming", self.t0_ns)
+        self.node.logger.info(
+            "start barrier passed after %.2f s (%d nodes ready and matched); t0 = %d ns; streaming",
+            now - self.created,
+            len(self.barrier.members),
+            self.t0_ns,
+        )
         return True
 
     def tick(self) -> None:
@@ -150,12 +201,7 @@ class Generator:
         if self.t0_ns is None and not self._start():
             return
         p = self.node.params
-        target = self.total
-        if p["real_time_factor"] > 0:
-            elapsed = time.monotonic() - self.wall0
-            target = min(target, int(elapsed * p["real_time_factor"] * self.fs) + 1)
-        if p["flow_control"]:
-            target = min(target, self.k_seen + 1 + p["max_lead_samples"])
+        target = self.pacer.target(time.monotonic())
         t0_s = self.t0_ns / 1e9  # type: ignore[operator]
         while self.k < target:
             k = self.k

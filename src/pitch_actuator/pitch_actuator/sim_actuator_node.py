@@ -76,7 +76,7 @@ class SimActuator:
         )
         self.reporter = SafetyReporter(node, self.governor, "sim_actuator")
         self.command_sub = node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream"
+            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream", required=True
         )
         node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
         self.t_origin_ns: int | None = None

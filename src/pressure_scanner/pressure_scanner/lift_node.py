@@ -69,10 +69,10 @@ class Lift:
         )
         self.diag = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics")
         node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/state", self.on_pitch, p["qos"]
+            "sensor_msgs/msg/JointState", "/pitch/state", self.on_pitch, p["qos"], required=True
         )
         node.create_subscription(
-            "sensor_msgs/msg/PointCloud2", "/pressure/taps", self.on_taps, p["qos"]
+            "sensor_msgs/msg/PointCloud2", "/pressure/taps", self.on_taps, p["qos"], required=True
         )
         node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
 

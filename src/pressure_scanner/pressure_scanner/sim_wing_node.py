@@ -46,7 +46,7 @@ class SimWing:
             "sensor_msgs/msg/PointCloud2", "/pressure/taps", p["taps_qos"]
         )
         node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/state", self.on_state, "stream"
+            "sensor_msgs/msg/JointState", "/pitch/state", self.on_state, "stream", required=True
         )
         self.refused = 0
         node.logger.info(

@@ -19,7 +19,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from cyclonedds._clayer import ddspy_take, ddspy_write
@@ -41,10 +41,15 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
+from .barrier import Endpoint
 from .dds_types import idl_struct
 from .messages import deserialize, new_message, normalize_type_name, serialize, type_hash
-from .qos import QosProfile
+from .qos import PROFILES, QosProfile
 
+# How long a reliable keep-all writer may block while a reader does not acknowledge (a paused
+# or starved process). Longer than Cyclone's participant lease (10 s): a reader that is gone
+# for good is unmatched by then and the writer goes on; one that is only paused catches up.
+WRITE_BLOCKING_S = 60
 _ANY_STATE = SampleState.Any | ViewState.Any | InstanceState.Any
 _TAKE_BATCH = 256
 
@@ -97,7 +102,7 @@ def cyclone_config() -> str | None:
 
 def dds_qos(profile: QosProfile, type_name: str | None = None, writer: bool = False) -> Qos:
     policies: list[Any] = [
-        Policy.Reliability.Reliable(max_blocking_time=duration(seconds=5))
+        Policy.Reliability.Reliable(max_blocking_time=duration(seconds=WRITE_BLOCKING_S))
         if profile.reliability == "reliable"
         else Policy.Reliability.BestEffort,
         Policy.Durability.TransientLocal
@@ -172,12 +177,47 @@ class _FlushQueue:
             pub.flush()
 
 
+class _MatchedGids:
+    """GIDs of an endpoint's matched remote endpoints, cached by instance handle."""
+
+    def __init__(self) -> None:
+        self.by_handle: dict[int, str] = {}
+
+    def gids(self, handles: list[int], lookup: Callable[[int], Any]) -> tuple[str, ...]:
+        out = []
+        for h in handles:
+            gid = self.by_handle.get(h)
+            if gid is None:
+                data = lookup(h)
+                if data is None:
+                    continue  # unmatched in between
+                gid = self.by_handle[h] = str(data.key)
+            out.append(gid)
+        return tuple(sorted(out))
+
+
+def _endpoint(
+    topic: str, kind: str, entity: Any, profile: QosProfile, matched: tuple[str, ...]
+) -> Endpoint:
+    return Endpoint(
+        topic=topic,
+        kind=kind,
+        gid=str(entity.guid),
+        reliable=profile.reliability == "reliable",
+        transient_local=profile.durability == "transient_local",
+        matched=matched,
+        matched_count=len(matched),
+    )
+
+
 @dataclass(eq=False)  # hashable by identity: a member of the flush queue's set
 class DdsPublisher:
     topic: str
     type_name: str
     writer: DataWriter
     flush_queue: _FlushQueue
+    profile: QosProfile = PROFILES["default"]
+    _matched: _MatchedGids = field(default_factory=_MatchedGids)
 
     def publish(self, msg: Any) -> None:
         data = serialize(msg)
@@ -201,6 +241,12 @@ class DdsPublisher:
     def subscription_count(self) -> int:
         return len(self.writer.get_matched_subscriptions())
 
+    def endpoint(self) -> Endpoint:
+        gids = self._matched.gids(
+            self.writer.get_matched_subscriptions(), self.writer.get_matched_subscription_data
+        )
+        return _endpoint(self.topic, "writer", self.writer, self.profile, gids)
+
 
 @dataclass
 class DdsSubscription:
@@ -210,9 +256,17 @@ class DdsSubscription:
     condition: ReadCondition
     callback: Callable[[Any], None]
     raw: bool
+    profile: QosProfile = PROFILES["default"]
+    _matched: _MatchedGids = field(default_factory=_MatchedGids)
 
     def publisher_count(self) -> int:
         return len(self.reader.get_matched_publications())
+
+    def endpoint(self) -> Endpoint:
+        gids = self._matched.gids(
+            self.reader.get_matched_publications(), self.reader.get_matched_publication_data
+        )
+        return _endpoint(self.topic, "reader", self.reader, self.profile, gids)
 
     def drain(self) -> int:
         """Take one batch of available samples and deliver them; returns how many.
@@ -277,7 +331,7 @@ class DdsBackend:
         writer = DataWriter(
             self.participant, self._topic(topic, type_name), dds_qos(qos, type_name)
         )
-        pub = DdsPublisher(topic, type_name, writer, self._flush_queue)
+        pub = DdsPublisher(topic, type_name, writer, self._flush_queue, qos)
         self._publishers.append(pub)
         return pub
 
@@ -295,7 +349,7 @@ class DdsBackend:
         )
         condition = ReadCondition(reader, _ANY_STATE)
         self._waitset.attach(condition)
-        sub = DdsSubscription(topic, type_name, reader, condition, callback, raw)
+        sub = DdsSubscription(topic, type_name, reader, condition, callback, raw, qos)
         self._subscriptions.append(sub)
         return sub
 
@@ -348,6 +402,12 @@ class DdsBackend:
 
     def now_ns(self) -> int:
         return time.time_ns()
+
+    def endpoints(self) -> list[Endpoint]:
+        """This node's readers and writers with the GIDs they have matched (start barrier)."""
+        return [p.endpoint() for p in self._publishers] + [
+            s.endpoint() for s in self._subscriptions
+        ]
 
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
         """Topics with at least one writer in the domain, from DCPSPublication discovery."""

@@ -14,6 +14,12 @@ A graph YAML (read by the launcher here and by the ROS launch files in aero_rig)
         remappings: {/pitch/command: /pitch/command}
         stops_graph: false            # true: when it exits (even with 0), the graph stops
         nice: 0                       # lower the CPU priority by 0..19, as `nice -n`
+        barrier: member               # start barrier (barrier.py): lead | member | none
+
+The start barrier: the ``lead`` node (the generator) starts the experiment only when every
+``member`` node (the default) has reported ready and matched on /graph/ready; the lead gets
+their names as its ``barrier_nodes`` parameter. ``none``: a process that does not report
+(not written on rig_runtime) and is not waited for.
 
 A node that exits non-zero always stops the graph.
 """
@@ -24,6 +30,8 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+
+BARRIER_ROLES = ("lead", "member", "none")
 
 
 class GraphError(ValueError):
@@ -41,6 +49,12 @@ class NodeSpec:
     remappings: dict[str, str] = field(default_factory=dict)
     stops_graph: bool = False
     nice: int = 0
+    barrier: str = "member"
+
+    @property
+    def fq_name(self) -> str:
+        prefix = "" if self.namespace in ("", "/") else "/" + self.namespace.strip("/")
+        return f"{prefix}/{self.name}"
 
     def ros_arguments(self, extra_overrides: dict[str, Any] | None = None) -> list[str]:
         """The ``--ros-args`` section ``ros2 run`` would pass for this node."""
@@ -67,6 +81,11 @@ class GraphSpec:
     name: str
     nodes: tuple[NodeSpec, ...]
     source: Path | None = None
+
+    def barrier_overrides(self) -> dict[str, dict[str, Any]]:
+        """``{lead: {"barrier_nodes": [member FQNs]}}``: what the start barrier waits for."""
+        members = [n.fq_name for n in self.nodes if n.barrier == "member"]
+        return {n.name: {"barrier_nodes": members} for n in self.nodes if n.barrier == "lead"}
 
     def node(self, name: str) -> NodeSpec:
         for n in self.nodes:
@@ -153,6 +172,7 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
             "remappings",
             "stops_graph",
             "nice",
+            "barrier",
         }
         if unknown:
             raise GraphError(f"{where}: unknown keys {sorted(unknown)}")
@@ -165,6 +185,11 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
         nice = item.get("nice", 0)
         if isinstance(nice, bool) or not isinstance(nice, int) or not 0 <= nice <= 19:
             raise GraphError(f"{where} ({item['name']}): 'nice' must be an integer 0..19")
+        barrier = item.get("barrier", "member")
+        if barrier not in BARRIER_ROLES:
+            raise GraphError(
+                f"{where} ({item['name']}): 'barrier' must be one of {', '.join(BARRIER_ROLES)}"
+            )
         params = tuple(resolve_path(str(p), base) for p in item.get("parameters") or [])
         for p in params:
             if not p.exists():
@@ -180,6 +205,10 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
                 remappings={str(k): str(v) for k, v in (item.get("remappings") or {}).items()},
                 stops_graph=bool(item.get("stops_graph", False)),
                 nice=nice,
+                barrier=barrier,
             )
         )
+    leads = [n.name for n in nodes if n.barrier == "lead"]
+    if len(leads) > 1:
+        raise GraphError(f"{source or 'graph'}: more than one barrier lead: {leads}")
     return GraphSpec(name=str(document.get("name", "graph")), nodes=tuple(nodes), source=source)

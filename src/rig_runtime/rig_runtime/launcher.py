@@ -55,7 +55,13 @@ class Launcher:
         # RIG_LAUNCHER_PID: a node whose parent is no longer this process stops (Node.spin), so
         # a launcher killed with SIGKILL leaves no graph running on.
         self.env = {**os.environ, **(env or {}), LAUNCHER_PID_ENV: str(os.getpid())}
-        self.overrides = dict(overrides or {})
+        # The start barrier's member list comes from the graph; explicit overrides win.
+        self.overrides = {
+            name: {**barrier, **dict(overrides or {}).get(name, {})}
+            for name, barrier in graph.barrier_overrides().items()
+        }
+        for name, values in dict(overrides or {}).items():
+            self.overrides.setdefault(name, dict(values))
         self.log_dir = log_dir
         self.grace_s = grace_s
         self.processes: list[NodeProcess] = []

@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+from .anomaly import ANOMALY_QOS, ANOMALY_TOPIC, ANOMALY_TYPE, Anomaly, AnomalyLog
+from .barrier import READY_TOPIC, READY_TYPE, Endpoint, ReadinessReport
 from .names import ArgumentError, RosArgs, normalize_namespace, parse_ros_args, resolve_name
 from .params import Parameter, ParameterError, ParameterSet, resolve_parameters
 from .qos import QosProfile, resolve_qos
@@ -79,6 +81,8 @@ class Backend(Protocol):
     def spin_once(self, timeout_s: float) -> None: ...
 
     def now_ns(self) -> int: ...
+
+    def endpoints(self) -> list[Endpoint]: ...
 
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]: ...
 
@@ -141,6 +145,14 @@ class Node:
         launcher = os.environ.get(LAUNCHER_PID_ENV, "")
         watched = launcher.isdigit() and int(launcher) == os.getppid()
         self._launcher_pid = int(launcher) if watched else None
+        # Start barrier (barrier.py): what this node reports on /graph/ready.
+        self._ready = True
+        self._ready_reason = ""
+        self._required_inputs: list[str] = []
+        self._records: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
+        self._ready_pub: Publisher | None = None
+        self._last_report = ""
+        self._anomalies: AnomalyLog | None = None
 
     @property
     def backend_name(self) -> str:
@@ -168,13 +180,19 @@ class Node:
         qos: str | QosProfile = "default",
         depth: int | None = None,
         raw: bool = False,
+        required: bool = False,
     ) -> Subscription:
         """Deliver messages of ``topic`` to ``callback`` on the spin thread.
 
         ``raw=True`` delivers ``(cdr_bytes, receive_time_ns)`` instead of a message (recorder).
+        ``required=True``: an input without which the node cannot work; the start barrier
+        waits until it has a publisher.
         """
+        resolved = self.resolve_topic(topic)
+        if required:
+            self._required_inputs.append(resolved)
         return self._backend.create_subscription(
-            self.resolve_topic(topic), type_name, callback, resolve_qos(qos, depth), raw
+            resolved, type_name, callback, resolve_qos(qos, depth), raw
         )
 
     def create_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
@@ -192,6 +210,62 @@ class Node:
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
         """Topics seen in the graph: name -> (type name, offered QoS if known)."""
         return self._backend.topic_types()
+
+    # -- start barrier (barrier.py) --------------------------------------------------------
+    def set_ready(self, ready: bool, reason: str = "") -> None:
+        """The node's own readiness (default: ready once constructed); ``reason`` says why not.
+
+        Reported on /graph/ready at the next announcement; a driver waiting for its device
+        sets False until the link is up.
+        """
+        self._ready = bool(ready)
+        self._ready_reason = "" if ready else (reason or "not ready")
+
+    def set_records(self, topics: Sequence[str], excluded: Sequence[str] = ()) -> None:
+        """This node records ``topics`` (``["*"]``: every topic but ``excluded``): the start
+        barrier waits until it has a reader on each of them that a member publishes."""
+        self._records = (tuple(topics), tuple(excluded))
+
+    def readiness_report(self) -> ReadinessReport:
+        return ReadinessReport(
+            node=self.fq_name,
+            ready=self._ready,
+            reason=self._ready_reason,
+            endpoints=tuple(self._backend.endpoints()),
+            required_inputs=tuple(self._required_inputs),
+            records=self._records[0],
+            excluded=self._records[1],
+        )
+
+    def start_readiness(self, period_s: float = 0.05) -> None:
+        """Publish the readiness report now and whenever it changes (run_node calls this
+        once the node is constructed)."""
+        if self._ready_pub is not None:
+            return
+        self._ready_pub = self.create_publisher(READY_TYPE, READY_TOPIC, "latched")
+        self._announce()
+        self.create_timer(period_s, self._announce)
+
+    def _announce(self) -> None:
+        assert self._ready_pub is not None
+        text = self.readiness_report().to_json()
+        if text != self._last_report:
+            self._last_report = text
+            self._ready_pub.publish(self.new_message(READY_TYPE, data=text))
+
+    # -- anomalies (anomaly.py) ------------------------------------------------------------
+    @property
+    def anomalies(self) -> AnomalyLog:
+        """This node's anomaly log: records go to /experiment/anomaly and to the log."""
+        if self._anomalies is None:
+            pub = self.create_publisher(ANOMALY_TYPE, ANOMALY_TOPIC, ANOMALY_QOS)
+
+            def send(anomaly: Anomaly) -> None:
+                self.logger.warning("anomaly: %s", anomaly.describe())
+                pub.publish(self.new_message(ANOMALY_TYPE, data=anomaly.to_json()))
+
+            self._anomalies = AnomalyLog(self.fq_name, send)
+        return self._anomalies
 
     def on_shutdown(self, callback: Callable[[], None]) -> None:
         self._on_shutdown.append(callback)
@@ -230,6 +304,17 @@ class Node:
             self._backend.spin_once(min(0.05, remaining))
         return True
 
+    def drain(self, until: Callable[[], bool], timeout_s: float) -> bool:
+        """Keep delivering messages after a shutdown request until ``until()`` holds or the
+        timeout passes (a recorder finishing what is in flight). True if ``until()`` held."""
+        deadline = time.monotonic() + timeout_s
+        while not until():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return until()
+            self._backend.spin_once(min(0.05, remaining))
+        return True
+
     def close(self) -> None:
         for callback in reversed(self._on_shutdown):
             try:
@@ -237,6 +322,8 @@ class Node:
             except Exception:
                 self.logger.exception("shutdown callback failed")
         self._on_shutdown.clear()
+        if self._anomalies is not None:
+            self._anomalies.close_all()  # an episode still open ends at its last stamp
         self._backend.close()
 
 
@@ -306,6 +393,7 @@ def run_node(
         close = getattr(instance, "close", None)
         if callable(close):
             node.on_shutdown(close)
+        node.start_readiness()
         profile_dir = os.environ.get("RIG_PROFILE_DIR")
         if profile_dir:  # cProfile of the spin loop, for `python -m pstats DIR/<node>.prof`
             import cProfile

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .barrier import Endpoint
 from .messages import normalize_type_name
 from .qos import QosProfile
 
@@ -41,10 +42,11 @@ def _rclpy_qos(profile: QosProfile) -> Any:
 
 
 class RclpyPublisher:
-    def __init__(self, publisher: Any, topic: str, type_name: str) -> None:
+    def __init__(self, publisher: Any, topic: str, type_name: str, profile: QosProfile) -> None:
         self._publisher = publisher
         self.topic = topic
         self.type_name = type_name
+        self.profile = profile
 
     def publish(self, msg: Any) -> None:
         self._publisher.publish(msg)
@@ -69,11 +71,14 @@ class RclpyBackend:
         self.node = rclpy.create_node(node_name, namespace=namespace)
         self._executor = SingleThreadedExecutor()
         self._executor.add_node(self.node)
+        self._endpoints: list[tuple[str, Any, QosProfile]] = []
 
     def create_publisher(self, topic: str, type_name: str, qos: QosProfile) -> RclpyPublisher:
         cls = _message_class(type_name)
         pub = self.node.create_publisher(cls, topic, _rclpy_qos(qos))
-        return RclpyPublisher(pub, topic, normalize_type_name(type_name))
+        publisher = RclpyPublisher(pub, topic, normalize_type_name(type_name), qos)
+        self._endpoints.append(("writer", publisher, qos))
+        return publisher
 
     def create_subscription(
         self,
@@ -92,6 +97,7 @@ class RclpyBackend:
             deliver = callback
         sub = self.node.create_subscription(cls, topic, deliver, _rclpy_qos(qos), raw=raw)
         sub.type_name = normalize_type_name(type_name)
+        self._endpoints.append(("reader", sub, qos))
         return sub
 
     def create_timer(self, period_s: float, callback: Callable[[], None]) -> Any:
@@ -110,6 +116,28 @@ class RclpyBackend:
 
     def now_ns(self) -> int:
         return int(self.node.get_clock().now().nanoseconds)
+
+    def endpoints(self) -> list[Endpoint]:
+        """Readers and writers with matched counts: rclpy does not name the matched endpoints
+        (their GIDs), so the start barrier compares counts (barrier.py)."""
+        out = []
+        for i, (kind, entity, qos) in enumerate(self._endpoints):
+            if kind == "writer":
+                count = int(entity._publisher.get_subscription_count())
+            else:
+                count = int(entity.get_publisher_count())
+            out.append(
+                Endpoint(
+                    topic=entity.topic if kind == "writer" else entity.topic_name,
+                    kind=kind,
+                    gid=f"{self.node.get_fully_qualified_name()}#{kind}{i}",
+                    reliable=qos.reliability == "reliable",
+                    transient_local=qos.durability == "transient_local",
+                    matched=None,
+                    matched_count=count,
+                )
+            )
+        return out
 
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
         """Topics with their type and the QoS offered by their first publisher."""

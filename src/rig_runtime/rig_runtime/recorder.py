@@ -47,6 +47,8 @@ class Recorder:
         self.exclude = set(node.params["exclude"])
         self.writer = SplitBagWriter(Path(output), split_seconds=node.params["split_seconds"])
         self.subscriptions: dict[str, Any] = {}
+        # The start barrier waits until each of these topics that a member publishes is recorded.
+        node.set_records(self.wanted or ["*"], sorted(self.exclude))
         node.logger.info(
             "recording %s to %s", ", ".join(self.wanted) or "all topics", Path(output).resolve()
         )
