@@ -5,7 +5,11 @@ The generator stamps command sample k at t0 + k/fs (DESIGN.md §5) and publishes
 k = round((stamp − t0)·fs). :class:`CampaignAssembler` stores, in arrays sized by the plan (so
 memory is bounded however long the run), the samples that fall in measured multisine periods
 and measured sine periods. A period with a missing, duplicated or invalid (NaN) sample is
-excluded and reported, never patched. The same assembler serves the online identifier and the
+excluded and reported, never patched. So is every period and sine record that an anomaly
+touches (rig_runtime.anomaly: the actuator ran on without commands, a command was not followed,
+a scanner frame was lost, ...): :meth:`CampaignAssembler.add_anomaly`. Every plan sample is
+accounted for on both channels (received once, missing, duplicated):
+:meth:`CampaignAssembler.data_quality`. The same assembler serves the online identifier and the
 offline fit from a bag, so both see identical data.
 """
 
@@ -14,6 +18,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+
+def _count_problems(count_u: np.ndarray, count_y: np.ndarray, u: np.ndarray, y: np.ndarray) -> str:
+    problems = []
+    for name, count, values in (("pitch", count_u, u), ("C_l", count_y, y)):
+        missing = int(np.sum(count == 0))
+        dup = int(np.sum(count > 1))
+        bad = int(np.sum((count >= 1) & ~np.isfinite(values)))
+        if missing:
+            problems.append(f"{missing} {name} samples missing")
+        if dup:
+            problems.append(f"{dup} {name} samples duplicated")
+        if bad:
+            problems.append(f"{bad} invalid {name} samples")
+    return ", ".join(problems)
 
 
 @dataclass
@@ -33,6 +52,11 @@ class PeriodBlock:
     y: np.ndarray
     count_u: np.ndarray
     count_y: np.ndarray
+    marks: list[str] = field(default_factory=list)  # per period: anomalies touching it ('' none)
+
+    def __post_init__(self) -> None:
+        if not self.marks:
+            self.marks = [""] * self.P
 
     @classmethod
     def empty(
@@ -45,22 +69,12 @@ class PeriodBlock:
     def period_valid(self) -> np.ndarray:
         """(P,) True where every sample of the period arrived exactly once and is finite."""
         ok = (self.count_u == 1) & (self.count_y == 1) & np.isfinite(self.u) & np.isfinite(self.y)
-        return ok.all(axis=0)
+        return ok.all(axis=0) & np.array([not m for m in self.marks], dtype=bool)
 
     def period_problem(self, p: int) -> str:
         """Why period p is excluded ('' if it is valid)."""
-        problems = []
-        for name, count, values in (("pitch", self.count_u, self.u), ("C_l", self.count_y, self.y)):
-            missing = int(np.sum(count[:, p] == 0))
-            dup = int(np.sum(count[:, p] > 1))
-            bad = int(np.sum((count[:, p] >= 1) & ~np.isfinite(values[:, p])))
-            if missing:
-                problems.append(f"{missing} {name} samples missing")
-            if dup:
-                problems.append(f"{dup} {name} samples duplicated")
-            if bad:
-                problems.append(f"{bad} invalid {name} samples")
-        return ", ".join(problems)
+        text = _count_problems(self.count_u[:, p], self.count_y[:, p], self.u[:, p], self.y[:, p])
+        return ", ".join(t for t in (text, self.marks[p]) if t)
 
 
 @dataclass
@@ -78,14 +92,25 @@ class SineRecord:
     y: np.ndarray  # (n,) C_l
     count_u: np.ndarray
     count_y: np.ndarray
+    mark: str = ""  # anomalies touching the record ('' none)
 
     def valid(self) -> bool:
         return bool(
-            np.all(self.count_u == 1)
+            not self.mark
+            and np.all(self.count_u == 1)
             and np.all(self.count_y == 1)
             and np.all(np.isfinite(self.u))
             and np.all(np.isfinite(self.y))
         )
+
+    def problem(self) -> str:
+        """Why the record is not used ('' if it is valid)."""
+        text = _count_problems(self.count_u, self.count_y, self.u, self.y)
+        return ", ".join(t for t in (text, self.mark) if t)
+
+    @property
+    def name(self) -> str:
+        return f"sine {self.frequency_hz:g} Hz at {self.offset_deg:g}°"
 
 
 @dataclass
@@ -108,10 +133,17 @@ class CampaignAssembler:
     blocks: dict[tuple[int, int], PeriodBlock] = field(default_factory=dict)
     sines: dict[int, SineRecord] = field(default_factory=dict)
     outside: int = 0  # samples not in any measured period (ramps, settling, baseline)
+    # id -> (first k, last k or None while open, description): rig_runtime.anomaly records
+    anomalies: dict[str, tuple[int, int | None, str]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.fs = float(self.plan["fs"])
         self.period_ns = 1e9 / self.fs
+        self.total = int(self.plan.get("total_samples") or 0)
+        # How often each plan sample arrived, per channel (saturating at 255), and how many
+        # samples fell outside the plan (before t0 or after its last sample).
+        self.coverage = {c: np.zeros(self.total, dtype=np.uint8) for c in ("u", "y")}
+        self.outside_plan = {"u": 0, "y": 0}
         self._slots: list[_Slot] = []
         for seg in self.plan["segments"]:
             if seg["kind"] == "multisine" and seg.get("period") is not None:
@@ -167,6 +199,12 @@ class CampaignAssembler:
     def add(self, channel: str, stamp_ns: int, value: float) -> None:
         """Store one sample of ``channel`` ("u": pitch [deg], "y": C_l) at its stamp."""
         k = self.index_of(stamp_ns)
+        if 0 <= k < self.total:
+            coverage = self.coverage[channel]
+            if coverage[k] < 255:
+                coverage[k] += 1
+        else:
+            self.outside_plan[channel] += 1
         slot = self._slot(k)
         if slot is None:
             self.outside += 1
@@ -184,6 +222,68 @@ class CampaignAssembler:
             values, counts = (rec.u, rec.count_u) if channel == "u" else (rec.y, rec.count_y)
             values[offset] = value
             counts[offset] += 1
+
+    def add_anomaly(self, anomaly_id: str, first_ns: int, last_ns: int | None, text: str) -> None:
+        """An anomaly (rig_runtime.anomaly.Anomaly fields): every period and sine record whose
+        plan samples [first, last] touches is excluded, naming it. An open anomaly
+        (``last_ns`` None) reaches to the end of the plan until it is published closed under
+        the same id."""
+        first = self.index_of(first_ns)
+        last = None if last_ns is None else self.index_of(last_ns)
+        self.anomalies[anomaly_id] = (first, last, text)
+        self._apply_marks()
+
+    def _apply_marks(self) -> None:
+        for block in self.blocks.values():
+            block.marks = [""] * block.P
+        for rec in self.sines.values():
+            rec.mark = ""
+        for slot in self._slots:
+            lo, hi = slot.start_k, slot.start_k + slot.length - 1
+            texts = [
+                text
+                for first, last, text in self.anomalies.values()
+                if first <= hi and (last is None or last >= lo)
+            ]
+            if not texts:
+                continue
+            text = "; ".join(texts)
+            if slot.kind == "multisine":
+                block = self.blocks[slot.key]
+                current = block.marks[slot.column]
+                block.marks[slot.column] = f"{current}; {text}" if current else text
+            else:
+                self.sines[slot.key].mark = text
+
+    def plan_anomalies(self) -> list[str]:
+        """The anomalies that touch the plan's samples (those after its end are harmless)."""
+        out = []
+        for first, last, text in self.anomalies.values():
+            if first < self.total and (last is None or last >= 0):
+                end = "open" if last is None else str(last)
+                out.append(f"samples {first}..{end}: {text}")
+        return out
+
+    def sample_accounting(self, final: bool = False) -> dict[str, dict[str, int]]:
+        """Per channel: plan samples expected, received exactly once, missing, duplicated, and
+        samples outside the plan. Expected: the whole plan when ``final``; before, the samples
+        up to the latest that both channels have reached (the rest may still be in flight)."""
+        upto = self.total - 1
+        if not final:
+            for coverage in self.coverage.values():
+                received = np.flatnonzero(coverage)
+                upto = min(upto, int(received[-1]) if received.size else -1)
+        out = {}
+        for channel, name in (("u", "pitch"), ("y", "C_l")):
+            seen = self.coverage[channel][: upto + 1]
+            out[name] = {
+                "expected": upto + 1,
+                "received": int(np.sum(seen == 1)),
+                "missing": int(np.sum(seen == 0)),
+                "duplicated": int(np.sum(seen > 1)),
+                "outside_plan": self.outside_plan[channel],
+            }
+        return out
 
     def add_many(self, channel: str, stamps_ns: Iterable[int], values: Iterable[float]) -> None:
         for stamp, value in zip(stamps_ns, values, strict=True):

@@ -10,6 +10,11 @@ publishes ``/identification/model`` (JSON, latched) and ``/identification/status
 (DiagnosticArray, latched). After ``plan_end`` it runs the final identification, writes models
 and the report (Table 1 Markdown/CSV, PNG figures) to ``output_dir`` and, with
 ``exit_after_final``, exits (the campaign's end).
+
+Data quality: ``/experiment/anomaly`` records (rig_runtime.anomaly) exclude the periods and sine
+records they touch; every plan sample is accounted for on both channels. What was lost or
+excluded is named in ``/identification/status``, ``models.json`` (``data_quality``), the
+report (``data_quality.md``, and a note above Table 1) and the final log lines.
 """
 
 import json
@@ -23,6 +28,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+from rig_runtime.anomaly import ANOMALY_QOS, ANOMALY_TOPIC, ANOMALY_TYPE, Anomaly
 from rig_runtime.diagnostics import diagnostic_array
 
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
@@ -30,6 +36,7 @@ from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 from . import refit_worker
 from .campaign import CampaignAssembler
 from .config import IdentificationConfig
+from .quality import data_quality_lines
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
 
@@ -72,6 +79,8 @@ class Identifier:
         self.out_dir = p["output_dir"]
         self.assembler: CampaignAssembler | None = None
         self.early: list[tuple[str, int, float]] = []
+        self.early_dropped = 0
+        self.early_anomalies: list[Anomaly] = []
         self.last_k = {"u": -1, "y": -1}
         # (needed k, final, reason, new multisine data: the models must be refitted)
         self.pending: list[tuple[int, bool, str, bool]] = []
@@ -116,6 +125,7 @@ class Identifier:
         node.create_subscription(
             "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events", required=True
         )
+        node.create_subscription(ANOMALY_TYPE, ANOMALY_TOPIC, self.on_anomaly, ANOMALY_QOS)
         node.create_timer(0.1, self.on_timer)
         node.create_timer(1.0, self.publish_status)
         self.publish_status()
@@ -143,11 +153,45 @@ class Identifier:
         for channel, stamp, value in self.early:
             self._add(channel, stamp, value)
         self.early.clear()
+        for anomaly in self.early_anomalies:
+            self._add_anomaly(anomaly)
+        self.early_anomalies.clear()
+        if self.early_dropped:
+            self.errors.append(
+                f"{self.early_dropped} samples arrived before the plan and were dropped "
+                f"(max_early_samples = {self.node.params['max_early_samples']})"
+            )
+            self.node.logger.error("%s", self.errors[-1])
+
+    def on_anomaly(self, msg: Any) -> None:
+        try:
+            anomaly = Anomaly.from_json(msg.data)
+        except ValueError as exc:
+            self.node.logger.error("%s", exc)
+            return
+        if self.assembler is None:
+            self.early_anomalies.append(anomaly)
+        else:
+            self._add_anomaly(anomaly)
+
+    def _add_anomaly(self, anomaly: Anomaly) -> None:
+        assert self.assembler is not None
+        self.assembler.add_anomaly(
+            anomaly.id,
+            anomaly.first_ns,
+            anomaly.last_ns,
+            f"{anomaly.node} {anomaly.kind}: {anomaly.detail}"
+            if anomaly.detail
+            else f"{anomaly.node} {anomaly.kind}",
+        )
+        self.models_stale = True  # periods may be excluded now: the next refit fits afresh
 
     def _add(self, channel: str, stamp: int, value: float) -> None:
         if self.assembler is None:
             if len(self.early) < self.node.params["max_early_samples"]:
                 self.early.append((channel, stamp, value))
+            else:
+                self.early_dropped += 1  # reported when the plan comes: never silently
             return
         self.assembler.add(channel, stamp, value)
         self.samples[channel] += 1
@@ -283,6 +327,11 @@ class Identifier:
             self.node.logger.info(
                 "final Table 1 (trained on all levels):\n%s", payload["table1"]["markdown"]
             )
+            problems = data_quality_lines(summary.get("data_quality", {}))
+            for line in problems:
+                self.node.logger.error("data not clean: %s", line)
+            if not problems:
+                self.node.logger.info("data clean: every plan sample arrived once, no anomaly")
         self.publish_status()
         if summary["complete"] and self.node.params["exit_after_final"]:
             self.node.request_shutdown(0)
@@ -315,7 +364,20 @@ class Identifier:
         warnings = self.last_summary["warnings"] if self.last_summary else []
         if warnings:
             values["warnings"] = "; ".join(warnings)
-        level = 2 if self.errors else (1 if excluded or warnings else 0)
+        quality = self.last_summary.get("data_quality", {}) if self.last_summary else {}
+        problems = data_quality_lines(quality)
+        if quality:
+            values["data"] = "clean" if not problems else f"NOT CLEAN: {len(problems)} problem(s)"
+            for name, c in quality.get("samples", {}).items():
+                values[f"{name} plan samples"] = (
+                    f"{c['received']}/{c['expected']} once, {c['missing']} missing, "
+                    f"{c['duplicated']} duplicated"
+                )
+        if quality.get("anomalies"):
+            values["anomalies"] = "; ".join(quality["anomalies"])
+        if quality.get("excluded_sines"):
+            values["excluded sine records"] = "; ".join(quality["excluded_sines"])
+        level = 2 if self.errors else (1 if excluded or warnings or problems else 0)
         message = values["state"]
         msg = diagnostic_array(
             self.node,

@@ -33,6 +33,7 @@ from .config import IdentificationConfig
 from .data import PeriodicData, random_phase_period
 from .metrics import predict_bla_sine, relative_rms_error
 from .pnlss import PNLSSModel, fit_pnlss, linear_states, periodic_records
+from .quality import data_quality, data_quality_lines, data_quality_note
 from .subspace import LinearStateSpace, fit_linear_ss
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
@@ -65,6 +66,12 @@ class IdentificationResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     complete: bool = False
     level1_signature: bytes = b""  # which level-1 periods the level-1 PNLSS was trained on
+    excluded_sines: list[str] = field(default_factory=list)
+    data_quality: dict[str, Any] = field(default_factory=dict)  # see data_quality()
+
+    @property
+    def clean(self) -> bool:
+        return bool(self.data_quality.get("clean", True))
 
     @property
     def level_names(self) -> list[str]:
@@ -78,10 +85,15 @@ class IdentificationResult:
         from .report import table1
 
         levels, freqs = self.level_names, self.sine_freqs
-        return {
+        tables = {
             "all_levels": table1(self.errors_all, levels, freqs),
             "level1": table1(self.errors_level1, levels, freqs),
         }
+        if self.clean:
+            return tables
+        # Never a clean-looking Table 1 from data that lost or excluded samples.
+        note = data_quality_note(self.data_quality)
+        return {key: (note + md, csv) for key, (md, csv) in tables.items()}
 
     def to_json_dict(self) -> dict[str, Any]:
         """The /identification/model payload (also models.json in the run directory)."""
@@ -131,6 +143,7 @@ class IdentificationResult:
             "table1": {"markdown": tables["all_levels"][0], "markdown_level1": tables["level1"][0]},
             "predictions": [_trim_prediction(p) for p in self.predictions],
             "warnings": self.warnings,
+            "data_quality": self.data_quality,
             "timings_s": self.timings_s,
         }
 
@@ -219,6 +232,7 @@ def identify(
         result.warnings = [w for w in models_from.warnings if not w.startswith("sine ")]
         result.timings_s = {"bla": 0.0, "pnlss": 0.0}
         _validate_on_sines(assembler, result, names)
+        result.data_quality = data_quality(assembler, result)
         result.timings_s["total"] = time.perf_counter() - t_start
         return result
 
@@ -298,6 +312,7 @@ def identify(
 
     # 3. Validation on the single sines.
     _validate_on_sines(assembler, result, names)
+    result.data_quality = data_quality(assembler, result)
     result.timings_s["total"] = time.perf_counter() - t_start
     return result
 
@@ -474,11 +489,9 @@ def _validate_on_sines(
             # Still streaming (its last sample not in yet) is no fault until the final refit.
             in_progress = not (rec.count_u[-1] and rec.count_y[-1])
             started = np.any(rec.count_u) or np.any(rec.count_y)
-            if started and (result.complete or not in_progress):
-                result.warnings.append(
-                    f"sine {rec.frequency_hz:g} Hz at {rec.offset_deg:g}°: incomplete record, "
-                    "not used for validation"
-                )
+            if (started or rec.mark) and (result.complete or not in_progress):
+                result.excluded_sines.append(f"{rec.name}: {rec.problem()}")
+                result.warnings.append(f"{rec.name}: not used for validation ({rec.problem()})")
             continue
         level = _nearest_level(result, rec)
         if level is None:
@@ -552,6 +565,25 @@ def write_report(
         (out / f"table1_{key}.md").write_text(markdown)
         (out / f"table1_{key}.csv").write_text(csv)
         written[f"table1_{key}"] = out / f"table1_{key}.md"
+    lines = data_quality_lines(result.data_quality)
+    samples = result.data_quality.get("samples", {})
+    text = ["# Data quality", ""]
+    text += [
+        f"- {name}: {c['received']} of {c['expected']} plan samples received once, "
+        f"{c['missing']} missing, {c['duplicated']} duplicated, "
+        f"{c['outside_plan']} outside the plan"
+        for name, c in samples.items()
+    ]
+    text += [
+        "",
+        "Clean: every plan sample arrived once; no anomaly; nothing excluded."
+        if not lines
+        else "**Not clean**:",
+        *[f"- {line}" for line in lines],
+    ]
+    path = out / "data_quality.md"
+    path.write_text("\n".join(text).rstrip() + "\n")
+    written["data_quality"] = path
     for lv in result.levels.values():
         tag = lv.name.replace(" ", "_")
         if lv.bla is not None:

@@ -80,7 +80,8 @@ def refit(
     Returns:
         (payload, summary): the /identification/model payload (pipeline's ``to_json_dict``)
         and {complete, warnings, levels: [{name, clusters: [k, sizes] | None, excluded}],
-        written (report files), timings_s, worker: {cpu_s, start_mb, peak_mb}}.
+        written (report files), data_quality (pipeline.data_quality), timings_s,
+        worker: {cpu_s, start_mb, peak_mb}}.
     """
     from .pipeline import identify, write_report
 
@@ -116,6 +117,7 @@ def refit(
             for lv in result.levels.values()
         ],
         "written": written,
+        "data_quality": result.data_quality,
         "timings_s": dict(result.timings_s),
         "worker": {
             "cpu_s": time.process_time() - cpu0,

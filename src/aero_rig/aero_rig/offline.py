@@ -4,7 +4,8 @@ Reads ``/experiment/plan``, ``/pitch/state`` and ``/wing/coefficients`` from a b
 sqlite3, recorded by this graph's recorder or by ``ros2 bag record``), rebuilds the plan's
 periods from the stamps exactly as the node does (aero_identification.campaign) and runs the
 final identification (aero_identification.pipeline). A bag whose tail is damaged is read up
-to the damage, with a warning; a bag without the needed topics is refused, naming them.
+to the damage, with a warning; a bag without the needed topics is refused, naming them. The
+anomalies recorded on ``/experiment/anomaly`` exclude what they touch, as in the node.
 """
 
 import json
@@ -20,6 +21,7 @@ from aero_identification.pipeline import (
     identify,
     write_report,
 )
+from rig_runtime.anomaly import ANOMALY_TOPIC, Anomaly
 from rig_runtime.messages import stamp_to_ns
 
 REQUIRED_TOPICS = ("/experiment/plan", "/pitch/state", "/wing/coefficients")
@@ -72,11 +74,15 @@ def read_campaign_bag(bag: str | Path) -> BagData:
         if plan is None or "t0_ns" not in plan:
             raise BagError(f"bag {path}: /experiment/plan holds no plan with t0_ns")
         assembler = CampaignAssembler(plan, int(plan["t0_ns"]))
-        wanted = [c for c in reader.connections if c.topic in REQUIRED_TOPICS[1:]]
+        wanted = [c for c in reader.connections if c.topic in (*REQUIRED_TOPICS[1:], ANOMALY_TOPIC)]
         count = 0
         try:
             for conn, _, raw in reader.messages(connections=wanted):
                 msg = reader.deserialize(raw, conn.msgtype)
+                if conn.topic == ANOMALY_TOPIC:
+                    a = Anomaly.from_json(msg.data)  # a later record of the same id replaces it
+                    assembler.add_anomaly(a.id, a.first_ns, a.last_ns, a.label())
+                    continue
                 stamp = stamp_to_ns(msg.header.stamp)
                 if conn.topic == "/pitch/state":
                     names = list(msg.name)

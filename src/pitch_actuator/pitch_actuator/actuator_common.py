@@ -53,6 +53,58 @@ def command_position(msg: Any) -> float:
     return float(positions[index]) if index < len(positions) else math.nan
 
 
+TRACKING_TOLERANCE_DEG = 1e-6
+
+
+class CommandTracking:
+    """Anomalies of the command stream, by command stamp (rig_runtime.anomaly).
+
+    A command the actuator did not follow exactly (clamped to a limit, refused as NaN, rate
+    limited, held after a watchdog trip or a stop) belongs to a ``not_tracking`` episode that
+    lasts until a command is followed again; command stamps that go backwards or skip samples
+    are a ``time_discontinuity``. The node passes every command with its stamp, the commanded
+    and the applied angle.
+    """
+
+    def __init__(self, node: Node, fs: float | None = None) -> None:
+        self.anomalies = node.anomalies
+        self.period_ns = None if fs is None else round(1e9 / fs)
+        self.last_stamp_ns: int | None = None
+
+    def command(self, stamp_ns: int, commanded_deg: float, applied_deg: float) -> None:
+        last = self.last_stamp_ns
+        if last is not None and self.period_ns is not None:
+            step = stamp_ns - last
+            if step <= 0 or step > 1.5 * self.period_ns:
+                self.anomalies.point(
+                    "time_discontinuity",
+                    min(last, stamp_ns),
+                    max(last, stamp_ns),
+                    f"command stamp went from {last} to {stamp_ns} ns "
+                    f"({step / self.period_ns:+.2f} samples)",
+                )
+        self.last_stamp_ns = stamp_ns if last is None else max(last, stamp_ns)
+        followed = math.isfinite(commanded_deg) and (
+            abs(applied_deg - commanded_deg) <= TRACKING_TOLERANCE_DEG
+        )
+        if followed:
+            self.anomalies.clear("not_tracking")
+            self.anomalies.end("watchdog", stamp_ns)
+        else:
+            self.anomalies.mark(
+                "not_tracking",
+                stamp_ns,
+                f"commanded {commanded_deg:.4f}°, applied {applied_deg:.4f}° (clamped, refused, "
+                "rate limited, or held after a watchdog trip or stop)",
+            )
+
+    def watchdog_tripped(self, detail: str) -> None:
+        """The governor's watchdog tripped between commands (rig: wall-clock time): the episode
+        starts after the last command and ends with the next command followed exactly."""
+        if self.last_stamp_ns is not None:
+            self.anomalies.begin("watchdog", self.last_stamp_ns, detail)
+
+
 class SafetyReporter:
     """Logs governor events and publishes /diagnostics (periodically and on events)."""
 

@@ -7,6 +7,10 @@ the last it applied. Feedback arrives at the controller's rate and is published 
 ``/pitch/state`` with the controller's acquisition stamps (``stamp_source: controller``, for a
 PTP-synchronised controller clock) or the host receive time (``stamp_source: host``). Link
 health (loss, duplicates, reordering, feedback age) goes to ``/diagnostics``.
+
+Start barrier: the node reports ready only once the controller has answered (its first
+feedback), so the experiment cannot start against a controller that is off or unreachable.
+Commands not followed exactly and watchdog trips are reported on ``/experiment/anomaly``.
 """
 
 import math
@@ -14,9 +18,15 @@ import sys
 import time
 from typing import Any
 
-from rig_runtime import Node, Parameter, run_node, set_stamp
+from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
 
-from .actuator_common import LIMIT_PARAMETERS, SafetyReporter, command_position, limits_from_params
+from .actuator_common import (
+    LIMIT_PARAMETERS,
+    CommandTracking,
+    SafetyReporter,
+    command_position,
+    limits_from_params,
+)
 from .controller_link import ControllerLink, ControllerLinkConfig
 from .controller_protocol import Feedback, Status
 from .safety import SafetyGovernor
@@ -70,7 +80,14 @@ class HwActuator:
             node, self.governor, f"pwac://{p['controller_host']}:{p['controller_port']}"
         )
         node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream"
+            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream", required=True
+        )
+        self.tracking = CommandTracking(node)
+        self.trips = 0
+        node.set_ready(
+            False,
+            f"no feedback from the position controller at "
+            f"{p['controller_host']}:{p['controller_port']} yet",
         )
         node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
         node.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
@@ -90,7 +107,9 @@ class HwActuator:
             self.sent_setpoint_deg = setpoint_deg
 
     def on_command(self, msg: Any) -> None:
-        setpoint_deg = self.governor.command(self._now(), math.degrees(command_position(msg)))
+        commanded_deg = math.degrees(command_position(msg))
+        setpoint_deg = self.governor.command(self._now(), commanded_deg)
+        self.tracking.command(stamp_to_ns(msg.header.stamp), commanded_deg, setpoint_deg)
         self._send(setpoint_deg)
 
     def on_stop(self, msg: Any) -> None:
@@ -102,7 +121,12 @@ class HwActuator:
     def on_timer(self) -> None:
         # Watchdog and ramp advance with time even when commands stop.
         self._send(self.governor.update(self._now()))
+        if self.governor.counters.watchdog_trips > self.trips:
+            self.trips = self.governor.counters.watchdog_trips
+            self.tracking.watchdog_tripped("no pitch command within the watchdog timeout")
         for feedback in self.link.poll():
+            if self.published == 0:
+                self.node.set_ready(True)
             self.publish_state(feedback)
             # After a controller-side watchdog hold only a new setpoint resumes motion.
             if feedback.status & Status.WATCHDOG and self.governor.mode.value == "tracking":

@@ -9,8 +9,14 @@ reads. Experiment time advances with the commands, so pauses of a slow graph are
 The command stream counts as lost when its publisher has left the graph (DDS matching) for
 ``watchdog_timeout_s``, or when no command came for ``stream_timeout_s`` of wall time even
 though a publisher is still there (a hung generator); then the node keeps stepping the model in
-real time: the governor holds, then ramps to the safe angle, as the rig would.
-``/pitch/stop`` (std_msgs/Bool): true = stop (hold, then safe angle), false = resume.
+real time: the governor holds, then ramps to the safe angle, as the rig would
+(stream_watchdog.py). ``/pitch/stop`` (std_msgs/Bool): true = stop (hold, then safe angle),
+false = resume.
+
+Every sample stepped without a command is reported as a ``free_run`` anomaly on
+``/experiment/anomaly``, like every command not followed exactly (``not_tracking``: clamped,
+refused, rate limited, held) and every jump of the command stamps (``time_discontinuity``): the
+identification excludes the periods they touch.
 """
 
 import math
@@ -20,9 +26,16 @@ from typing import Any
 
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
 
-from .actuator_common import LIMIT_PARAMETERS, SafetyReporter, command_position, limits_from_params
+from .actuator_common import (
+    LIMIT_PARAMETERS,
+    CommandTracking,
+    SafetyReporter,
+    command_position,
+    limits_from_params,
+)
 from .dynamics import ActuatorModel, ActuatorParams
 from .safety import SafetyGovernor
+from .stream_watchdog import SilentStreamWatchdog
 
 PARAMETERS = [
     *LIMIT_PARAMETERS,
@@ -81,13 +94,17 @@ class SimActuator:
         node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
         self.t_origin_ns: int | None = None
         self.last_stamp_ns: int | None = None
-        self.last_command_wall = 0.0
-        self.self_steps = 0
+        self.watchdog = SilentStreamWatchdog(
+            self.fs, p["stream_timeout_s"], self.limits.watchdog_timeout_s
+        )
+        self.tracking = CommandTracking(node, self.fs)
         node.create_timer(1.0 / self.fs, self.on_timer)
 
     def _time_s(self, stamp_ns: int) -> float:
         if self.t_origin_ns is None:
-            self.t_origin_ns = stamp_ns
+            # The actuator was at rest one sample before the first command, so that command is
+            # reachable within the rate limit like every later one (governor time starts at 0).
+            self.t_origin_ns = stamp_ns - round(1e9 / self.fs)
         return (stamp_ns - self.t_origin_ns) / 1e9
 
     def _step_and_publish(self, setpoint_rad: float, stamp_ns: int) -> None:
@@ -104,10 +121,13 @@ class SimActuator:
 
     def on_command(self, msg: Any) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
-        setpoint = self.governor.command_rad(self._time_s(stamp_ns), command_position(msg))
+        if self.watchdog.command(time.monotonic()):
+            self.node.anomalies.end("free_run")
+            self.node.logger.warning("commands resumed: free run ended")
+        commanded = command_position(msg)
+        setpoint = self.governor.command_rad(self._time_s(stamp_ns), commanded)
+        self.tracking.command(stamp_ns, math.degrees(commanded), math.degrees(setpoint))
         self._step_and_publish(setpoint, stamp_ns)
-        self.last_command_wall = time.monotonic()
-        self.self_steps = 0
 
     def on_stop(self, msg: Any) -> None:
         t = self._time_s(self.last_stamp_ns or time.time_ns())
@@ -120,27 +140,27 @@ class SimActuator:
         # Without commands the actuator lives on in real time: hold, then ramp to safe.
         if self.last_stamp_ns is None:
             return
-        silent = time.monotonic() - self.last_command_wall
-        timeout = self.node.params["stream_timeout_s"]
         publisher_count = getattr(self.command_sub, "publisher_count", None)
-        if publisher_count is not None and publisher_count() == 0:
-            timeout = min(timeout, self.limits.watchdog_timeout_s)  # the generator is gone
-        if self.governor.stopped:
-            timeout = min(timeout, 2.0 / self.fs)  # a stop request needs no stream to act
-        if silent < timeout:
+        present = publisher_count is None or publisher_count() > 0
+        now = time.monotonic()
+        due = self.watchdog.due(now, present, self.governor.stopped)
+        if not due:
             return
-        if self.self_steps == 0:
-            self.node.logger.warning(
-                "no command for %.2f s (publishers: %s): running on in real time",
-                silent,
-                publisher_count() if publisher_count is not None else "?",
+        if not self.watchdog.running_on:
+            first_ns = self.last_stamp_ns + round(1e9 / self.fs)
+            detail = (
+                f"no command for {self.watchdog.silent_s(now):.2f} s "
+                f"({'publisher still there' if present else 'no command publisher left'}): "
+                "running on in real time (hold, then ramp to the safe angle)"
             )
-        due = int((silent - timeout) * self.fs) + 1 - self.self_steps
-        for _ in range(max(0, min(due, 50))):
+            self.node.logger.warning("%s", detail)
+            self.node.anomalies.begin("free_run", first_ns, detail)
+        for _ in range(due):
             stamp_ns = self.last_stamp_ns + round(1e9 / self.fs)
             setpoint_deg = self.governor.update(self._time_s(stamp_ns))
             self._step_and_publish(math.radians(setpoint_deg), stamp_ns)
-            self.self_steps += 1
+            self.node.anomalies.mark("free_run", stamp_ns)
+            self.watchdog.stepped()
 
 
 def main(argv: list[str] | None = None) -> int:

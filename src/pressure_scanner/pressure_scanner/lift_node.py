@@ -6,7 +6,8 @@ z = C_m about the quarter chord) with the taps' stamp: exactly one coefficients 
 sample. The pitch is matched by stamp (exact in simulation; linear interpolation between the
 neighbouring states on the rig, within ``max_alpha_gap_s``). Taps that are NaN or outside the
 scanner range are excluded; a sample whose remaining taps do not cover the surface is invalid
-and published as NaN, never as a number. Exclusions are counted on ``/diagnostics``.
+and published as NaN, never as a number. Exclusions are counted on ``/diagnostics``; each run of
+NaN samples is one ``invalid_coefficients`` anomaly on ``/experiment/anomaly``.
 """
 
 import bisect
@@ -139,6 +140,10 @@ class Lift:
             if not c.valid[0]:
                 self.counts["invalid"] += 1
                 self.last_reason = c.describe(0)
+        if math.isfinite(cl):
+            self.node.anomalies.clear("invalid_coefficients")
+        else:
+            self.node.anomalies.mark("invalid_coefficients", stamp, self.last_reason)
         out = self.node.new_message("geometry_msgs/msg/Vector3Stamped")
         out.header.stamp = msg.header.stamp
         out.header.frame_id = "wing"

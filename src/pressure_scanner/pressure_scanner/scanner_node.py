@@ -77,9 +77,28 @@ class Scanner:
             self.client.start_tare(self.node.params["tare_frames"])
             self.tare_reported = False
 
+    lost_reported = 0
+    last_stamp_ns: int | None = None
+
     def on_timer(self) -> None:
-        for frame in self.client.poll():
+        frames = self.client.poll()
+        for frame in frames:
             self.publish(frame)
+        if frames:
+            # Frames lost since the last poll: the stretch from the last frame before this batch
+            # to the last of it is reported, so the identification excludes the periods it
+            # touches (the lost frames themselves are missing samples there).
+            lost = self.client.statistics().frames.lost
+            if lost > self.lost_reported:
+                first = self.last_stamp_ns if self.last_stamp_ns is not None else frames[0].stamp_ns
+                self.node.anomalies.point(
+                    "frame_loss",
+                    first,
+                    frames[-1].stamp_ns,
+                    f"{lost - self.lost_reported} scanner frame(s) lost",
+                )
+                self.lost_reported = lost
+            self.last_stamp_ns = frames[-1].stamp_ns
         result = self.client.tare_result
         if not self.tare_reported and result is not None and not self.client.tare_in_progress:
             self.tare_reported = True

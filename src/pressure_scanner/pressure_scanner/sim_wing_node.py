@@ -3,14 +3,15 @@
 Reactive: every ``/pitch/state`` sample yields one ``/pressure/taps`` sample with the same
 stamp. The angle of attack is the state's ``alpha_true`` joint (simulation ground truth: true
 pitch + free-stream gust, from the simulated actuator) or, without it, the ``pitch`` joint.
-Deterministic for a seed whatever the speed.
+Deterministic for a seed whatever the speed. A state without a finite pitch gets no taps sample
+and is reported on ``/experiment/anomaly`` (``no_pitch``).
 """
 
 import math
 import sys
 from typing import Any
 
-from rig_runtime import Node, Parameter, run_node
+from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 
 from .plant import WingPlant
 from .tap_cloud import fill_cloud, point_fields
@@ -59,8 +60,10 @@ class SimWing:
             alpha = joint_position(msg, "pitch")
         if alpha is None or not math.isfinite(alpha):
             self.refused += 1
-            self.node.logger.error(
-                "state without a finite pitch: sample skipped (%d)", self.refused
+            self.node.anomalies.point(
+                "no_pitch",
+                stamp_to_ns(msg.header.stamp),
+                detail="state without a finite pitch: no taps sample for it",
             )
             return
         pressures = self.plant.step(alpha)

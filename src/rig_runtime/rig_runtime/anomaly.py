@@ -51,6 +51,11 @@ class Anomaly:
         except (ValueError, KeyError, TypeError) as exc:
             raise ValueError(f"not an anomaly record: {text[:120]!r} ({exc})") from None
 
+    def label(self) -> str:
+        """``node kind: detail``: how reports name the anomaly."""
+        head = f"{self.node} {self.kind}"
+        return f"{head}: {self.detail}" if self.detail else head
+
     def describe(self) -> str:
         end = "still open" if self.last_ns is None else f"{self.last_ns}"
         text = f"{self.node} {self.kind} [{self.first_ns} .. {end}] ns"

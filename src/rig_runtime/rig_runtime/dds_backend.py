@@ -366,15 +366,16 @@ class DdsBackend:
         """Wake a blocked spin_once from another thread (drivers with receive threads)."""
         self._guard.set(True)
 
-    def spin_once(self, timeout_s: float) -> None:
+    def spin_once(self, timeout_s: float) -> int:
+        """One executor turn; returns how many samples it delivered."""
         self._flush_queue.turn_thread = threading.get_ident()
         try:
-            self._turn(timeout_s)
+            return self._turn(timeout_s)
         finally:
             self._flush_queue.turn_thread = None
             self._flush_queue.flush()
 
-    def _turn(self, timeout_s: float) -> None:
+    def _turn(self, timeout_s: float) -> int:
         now = time.monotonic_ns()
         timeout_ns = int(timeout_s * 1e9)
         self._timers = [t for t in self._timers if not t.cancelled]
@@ -384,10 +385,13 @@ class DdsBackend:
             self._waitset.wait(timeout_ns)
         self._guard.set(False)
         busy = True
+        delivered = 0
         while busy:  # round robin, one batch each, until every reader is empty
             busy = False
             for sub in self._subscriptions:
-                if sub.drain() >= _TAKE_BATCH:
+                n = sub.drain()
+                delivered += n
+                if n >= _TAKE_BATCH:
                     busy = True
             self._flush_queue.flush()  # what this round produced goes downstream now
             if time.monotonic_ns() - now > 20_000_000:
@@ -399,6 +403,7 @@ class DdsBackend:
                 if timer.next_ns <= now:  # skip missed periods instead of bursting
                     timer.next_ns = now + timer.period_ns
                 timer.callback()
+        return delivered
 
     def now_ns(self) -> int:
         return time.time_ns()
@@ -430,11 +435,31 @@ class DdsBackend:
         return dict(self._discovered)
 
     def close(self) -> None:
+        """Delete this node's readers and writers now, so that peers see them leave at once
+        (an orderly unmatch) instead of at the participant's lease expiry. A writer with data
+        not yet acknowledged lingers (Cyclone's writer linger, 1 s) until its readers have it:
+        a recorder stopped with the graph still gets the last samples."""
         for sub in self._subscriptions:
             try:
                 self._waitset.detach(sub.condition)
             except DDSException:
                 pass
+        for pub in self._publishers:
+            _delete_entity(pub.writer)
+        for sub in self._subscriptions:
+            _delete_entity(sub.condition)
+            _delete_entity(sub.reader)
         self._subscriptions.clear()
         self._publishers.clear()
         self._timers.clear()
+
+
+def _delete_entity(entity: Any) -> None:
+    """dds_delete an entity now (cyclonedds keeps every entity alive in a class-level table,
+    so dropping the Python reference never deletes it)."""
+    table = type(entity)._entities
+    ref = getattr(entity, "_ref", None)
+    if ref is None or ref not in table:
+        return
+    del table[ref]
+    entity._delete(ref)

@@ -78,7 +78,7 @@ class Backend(Protocol):
 
     def new_message(self, type_name: str, **fields: Any) -> Any: ...
 
-    def spin_once(self, timeout_s: float) -> None: ...
+    def spin_once(self, timeout_s: float) -> int | None: ...
 
     def now_ns(self) -> int: ...
 
@@ -305,15 +305,18 @@ class Node:
         return True
 
     def drain(self, until: Callable[[], bool], timeout_s: float) -> bool:
-        """Keep delivering messages after a shutdown request until ``until()`` holds or the
-        timeout passes (a recorder finishing what is in flight). True if ``until()`` held."""
+        """Keep delivering messages after a shutdown request until ``until()`` holds and a turn
+        delivers nothing more, or the timeout passes (a recorder taking what is still in its
+        readers once the writers are gone). True if ``until()`` held."""
         deadline = time.monotonic() + timeout_s
-        while not until():
+        while True:
             remaining = deadline - time.monotonic()
+            done = until()
             if remaining <= 0:
-                return until()
-            self._backend.spin_once(min(0.05, remaining))
-        return True
+                return done
+            delivered = self._backend.spin_once(0.0 if done else min(0.05, remaining))
+            if done and not delivered:
+                return True
 
     def close(self) -> None:
         for callback in reversed(self._on_shutdown):

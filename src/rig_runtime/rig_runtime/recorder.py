@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from .bag import SplitBagWriter
+from .barrier import READY_TOPIC
 from .node import Node, run_node
 from .params import Parameter
 from .qos import QosProfile
@@ -34,6 +35,14 @@ PARAMETERS = [
         max=3600.0,
     ),
     Parameter("discovery_period_s", 0.2, "how often to look for new topics [s]", min=0.01),
+    Parameter(
+        "drain_timeout_s",
+        3.0,
+        "on shutdown, wait this long at most for the publishers to leave, recording what they "
+        "still deliver, before the bag is closed [s]",
+        min=0.0,
+        max=60.0,
+    ),
 ]
 
 
@@ -82,7 +91,28 @@ class Recorder:
         )
         self.node.logger.info("recording %s [%s]", topic, type_name)
 
+    def _publishing(self) -> list[str]:
+        """Recorded topics that still have a publisher."""
+        out = []
+        for topic, sub in self.subscriptions.items():
+            if topic == READY_TOPIC:  # this node's own writer is one of them
+                continue
+            count = getattr(sub, "publisher_count", None) or sub.get_publisher_count
+            if count() > 0:
+                out.append(topic)
+        return out
+
     def close(self) -> None:
+        # Stopped together with the graph (rig-launch, ros2 launch: SIGINT to every node at
+        # once): the publishers send what they still hold as they leave; record it before the
+        # bag is closed, so a stopped graph loses nothing.
+        timeout = self.node.params["drain_timeout_s"]
+        if not self.node.drain(lambda: not self._publishing(), timeout):
+            self.node.logger.warning(
+                "%s still published after %.1f s: closing the bag",
+                ", ".join(self._publishing()),
+                timeout,
+            )
         self.writer.close()
         self.node.logger.info(
             "bag %s finalised: %d messages", self.writer.path, self.writer.message_count
