@@ -81,7 +81,7 @@ def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) ->
     asm.add_many("y", stamps[:half], y[:half])
     config = IdentificationConfig(max_iter=2)
     interim = identify(asm, config)
-    assert not any("incomplete record" in w for w in interim.warnings), interim.warnings
+    assert not any("not used for validation" in w for w in interim.warnings), interim.warnings
     final = identify(asm, config, final=True, models_from=interim)
     assert any(f"sine {sine['frequency_hz']:g} Hz" in w for w in final.warnings), final.warnings
     # A gap in a record whose last sample is in is a fault at once.
@@ -92,7 +92,62 @@ def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) ->
     asm.add_many("u", stamps[:end][gap], u[:end][gap])
     asm.add_many("y", stamps[:end], y[:end])
     gapped = identify(asm, config)
-    assert any("incomplete record" in w for w in gapped.warnings), gapped.warnings
+    assert any("1 pitch samples missing" in w for w in gapped.warnings), gapped.warnings
+    assert any("1 pitch samples missing" in e for e in gapped.excluded_sines)
+
+
+def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> None:
+    plan = campaign[0]
+    seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 2)
+    sine = next(s for s in plan["segments"] if s["kind"] == "sine")
+    asm = _assemble(campaign)
+    clean = identify(asm, IdentificationConfig(max_iter=2), final=True)
+    assert clean.data_quality["clean"] and clean.tables()["all_levels"][0].startswith("| model")
+    stamp = lambda k: T0 + round(k * 1e9 / plan["fs"])  # noqa: E731
+    # A free run over the last sample of period 2 and the first of period 3 of one block ...
+    k = seg["start_k"] + seg["length"] - 1
+    asm.add_anomaly("sim_actuator/free_run/1", stamp(k), stamp(k + 1), "sim_actuator free_run")
+    # ... and an episode still open from inside the first sine record to the end.
+    asm.add_anomaly("lift/invalid/1", stamp(sine["start_k"] + 3), None, "lift invalid")
+    block = asm.blocks[(seg["level"], seg["realization"])]
+    assert list(np.flatnonzero(~block.period_valid())) == [2, 3]
+    assert "sim_actuator free_run" in block.period_problem(2)
+    later = [r for r in asm.sines.values() if r.mark]
+    assert later and all(r.mark == "lift invalid" for r in later)
+    result = identify(asm, IdentificationConfig(max_iter=2), final=True)
+    quality = result.data_quality
+    assert not quality["clean"] and len(quality["anomalies"]) == 2
+    assert any("period 2" in p and "free_run" in p for p in quality["excluded_periods"])
+    assert quality["excluded_sines"] and all("lift invalid" in e for e in quality["excluded_sines"])
+    for markdown, _ in result.tables().values():
+        assert markdown.startswith("> **Data not clean**")
+    # Closed again before the sine: the sines are back, the periods stay excluded.
+    asm.add_anomaly("lift/invalid/1", stamp(0), stamp(1), "lift invalid")
+    assert not any(r.mark for r in asm.sines.values())
+    assert not block.period_valid()[2]
+
+
+def test_every_plan_sample_is_accounted_for(campaign) -> None:
+    plan, stamps, u, y = campaign
+    asm = _assemble(campaign, drop=10, duplicate=20)
+    accounting = asm.sample_accounting(final=True)
+    total = plan["total_samples"]
+    assert accounting["pitch"] == {
+        "expected": total,
+        "received": total - 1,
+        "missing": 1,
+        "duplicated": 0,
+        "outside_plan": 0,
+    }
+    assert accounting["C_l"]["duplicated"] == 1 and accounting["C_l"]["missing"] == 0
+    # Before the end, only what both channels have reached is expected.
+    partial = CampaignAssembler(plan, T0)
+    partial.add_many("u", stamps[:100], u[:100])
+    partial.add_many("y", stamps[:90], y[:90])
+    partial.add("y", int(stamps[-1]) + 10**9, 0.0)  # after the plan's end
+    counts = partial.sample_accounting()
+    assert counts["pitch"]["expected"] == 90 and counts["C_l"]["missing"] == 0
+    assert counts["C_l"]["outside_plan"] == 1
 
 
 def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -> None:

@@ -1,7 +1,7 @@
 """``aero-rig``: run the pitching-wing campaign, live graphs, offline fits and views.
 
     aero-rig campaign [--plan default|short|FILE] [--real-time-factor X] [--out DIR]
-                      [--rerun spawn|save|serve|off] [--seed N]
+                      [--rerun spawn|save|serve|off] [--seed N] [--allow-excluded]
     aero-rig run sim|rig [--graph FILE] [--duration S]
     aero-rig fit BAG [--out DIR]
     aero-rig view BAG|live [--save FILE.rrd]
@@ -9,7 +9,10 @@
 ``campaign`` launches the simulated graph (generator, simulated actuator, simulated wing, lift,
 identifier, recorder, optionally the Rerun view) as processes on the Cyclone DDS backend, runs
 the plan to its end, waits for the final identification, stops everything and prints Table 1
-and the run directory (bag, models, report, .rrd).
+and the run directory (bag, models, report, .rrd). A run that lost or excluded data (missing or
+duplicated samples, anomalies such as a free-running actuator, excluded periods or sine records,
+a bag short of samples) lists what on its last lines and exits with code 3, unless
+``--allow-excluded`` is given.
 """
 
 import argparse
@@ -26,6 +29,9 @@ from typing import Any
 from rig_runtime.graph import GraphError, GraphSpec, load_graph, package_share
 from rig_runtime.launcher import Launcher
 
+from .verdict import run_problems
+
+EXIT_NOT_CLEAN = 3  # the campaign finished but lost or excluded data
 VIEW_MODES = ("spawn", "save", "serve", "off")  # "off": no view node (the node calls it "none")
 
 
@@ -176,11 +182,14 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
+    problems = run_problems(run_dir, monitor.total)
     summary = {
         "wall_s": round(wall, 1),
         "experiment_s": round(monitor.total / 200.0, 1) if monitor.total else None,
         "real_time_factor": round(monitor.total / 200.0 / wall, 1) if monitor.total else None,
         "exit_codes": codes,
+        "clean": not problems,
+        "problems": problems,
     }
     (run_dir / "campaign.json").write_text(json.dumps(summary, indent=1))
     print("\nTable 1, trained on all levels (estimation: one realization per level):")
@@ -196,6 +205,21 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     print(f"run directory: {run_dir}  (bag/, models.json, table1_*.md|csv, *.png, logs/)")
     if bad:
         print(f"aero-rig: warning: nodes stopped uncleanly: {bad}", file=sys.stderr)
+    if problems:
+        print(f"\nDATA NOT CLEAN: {len(problems)} problem(s); Table 1 uses only what was left:")
+        for line in problems[:40]:
+            print(f"  - {line}")
+        if len(problems) > 40:
+            print(f"  - … {len(problems) - 40} more in {run_dir / 'data_quality.md'}")
+        if not args.allow_excluded:
+            print(
+                "aero-rig: the campaign lost or excluded data (above); exit code 3. Pass "
+                "--allow-excluded to accept such a run.",
+                file=sys.stderr,
+            )
+            return EXIT_NOT_CLEAN
+    else:
+        print("data clean: every plan sample arrived and was recorded once, no anomaly")
     return 0
 
 
@@ -265,6 +289,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--graph", default=None, help="graph YAML (default aero_rig config/sim.yaml)")
     p.add_argument("--timeout", type=float, default=0.0, help="give up after S wall seconds")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--allow-excluded",
+        action="store_true",
+        help="exit 0 even if data were lost or excluded (they are still listed)",
+    )
     p.set_defaults(func=cmd_campaign)
 
     p = sub.add_parser("run", help="run the sim or rig graph until Ctrl-C")

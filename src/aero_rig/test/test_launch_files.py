@@ -185,9 +185,16 @@ def test_one_node_per_graph_node(launch_file: str, graph: str, tmp_path: Path) -
         elif expected.executable == "identifier":
             assert overrides == [{**expected.parameter_overrides, "output_dir": str(run)}]
         else:
-            assert overrides == (
-                [expected.parameter_overrides] if expected.parameter_overrides else []
-            )
+            # The start barrier's lead waits for every member, as rig-launch tells it.
+            wanted = {
+                **expected.parameter_overrides,
+                **spec.barrier_overrides().get(expected.name, {}),
+            }
+            assert overrides == ([wanted] if wanted else [])
+            if expected.barrier == "lead":
+                assert wanted["barrier_nodes"] == [
+                    n.fq_name for n in spec.nodes if n.barrier == "member"
+                ]
         assert node["remappings"] == list(expected.remappings.items())
 
 

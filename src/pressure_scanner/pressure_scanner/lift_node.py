@@ -10,10 +10,8 @@ and published as NaN, never as a number. Exclusions are counted on ``/diagnostic
 NaN samples is one ``invalid_coefficients`` anomaly on ``/experiment/anomaly``.
 """
 
-import bisect
 import math
 import sys
-from collections import deque
 from typing import Any
 
 import numpy as np
@@ -22,6 +20,7 @@ from rig_runtime.diagnostics import diagnostic_array
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 
 from .integration import DEFAULT_SCANNER_RANGE_PA, PressureIntegrator
+from .pitch_alignment import PitchAlignment
 from .tap_cloud import read_cloud
 from .taps import load_taps
 from .wing_params import WingParams
@@ -47,6 +46,16 @@ PARAMETERS = [
 HISTORY = 4000
 
 
+def gap_ns(seconds: float) -> int:
+    """``max_alpha_gap_s`` as integer nanoseconds for :class:`PitchAlignment`.
+
+    Stamp differences are integers, so ``d <= s * 1e9`` holds exactly when ``d <= int(s * 1e9)``
+    (s >= 0); infinity (any gap) becomes a bound no difference of two stamps reaches.
+    """
+    ns = seconds * 1e9
+    return int(ns) if math.isfinite(ns) else 2**64
+
+
 class Lift:
     def __init__(self, node: Node) -> None:
         p = node.params
@@ -56,12 +65,7 @@ class Lift:
             load_taps(p["taps_file"] or None), (p["scanner_min_pa"], p["scanner_max_pa"])
         )
         self.n_taps = self.integrator.taps.n_taps
-        self.pitch_stamps: deque[int] = deque(maxlen=HISTORY)
-        self.pitch_values: deque[float] = deque(maxlen=HISTORY)
-        # Exact stamps (simulation: taps k carry the stamp of state k) in O(1); bisect on the
-        # deques (O(n) indexing) only for the rig's interpolation.
-        self.pitch_by_stamp: dict[int, float] = {}
-        self.pending: deque[tuple[int, Any]] = deque()
+        self.alignment = PitchAlignment(gap_ns(p["max_alpha_gap_s"]), p["max_pending"], HISTORY)
         self.counts = {"published": 0, "invalid": 0, "alpha_missing": 0}
         self.excluded_per_tap = np.zeros(self.n_taps, dtype=np.int64)
         self.last_reason = ""
@@ -82,48 +86,15 @@ class Lift:
         i = names.index("pitch") if "pitch" in names else 0
         if i >= len(msg.position):
             return
-        stamp = stamp_to_ns(msg.header.stamp)
-        if self.pitch_stamps and stamp <= self.pitch_stamps[-1]:
-            return  # out of order or repeated: the history stays sorted
-        if len(self.pitch_stamps) == HISTORY:
-            self.pitch_by_stamp.pop(self.pitch_stamps[0], None)
-        self.pitch_stamps.append(stamp)
-        self.pitch_values.append(float(msg.position[i]))
-        self.pitch_by_stamp[stamp] = self.pitch_values[-1]
-        while self.pending and self._alpha(self.pending[0][0], final=False) is not None:
-            self._process(*self.pending.popleft())
-
-    def _alpha(self, stamp: int, final: bool) -> float | None:
-        exact = self.pitch_by_stamp.get(stamp)
-        if exact is not None:
-            return exact
-        stamps = self.pitch_stamps
-        if not stamps or stamp > stamps[-1]:
-            if final and stamps and stamp - stamps[-1] <= self.node.params["max_alpha_gap_s"] * 1e9:
-                return self.pitch_values[-1]
-            return None
-        i = bisect.bisect_left(stamps, stamp)
-        if stamps[i] == stamp:
-            return self.pitch_values[i]
-        if i == 0:
-            return None if not final else math.nan
-        s0, s1 = stamps[i - 1], stamps[i]
-        if s1 - s0 > self.node.params["max_alpha_gap_s"] * 1e9:
-            return math.nan
-        w = (stamp - s0) / (s1 - s0)
-        return (1 - w) * self.pitch_values[i - 1] + w * self.pitch_values[i]
+        released = self.alignment.add_pitch(stamp_to_ns(msg.header.stamp), msg.position[i])
+        for stamp, taps, alpha in released:
+            self._process(stamp, taps, alpha)
 
     def on_taps(self, msg: Any) -> None:
-        stamp = stamp_to_ns(msg.header.stamp)
-        if self.pending or self._alpha(stamp, final=False) is None:
-            self.pending.append((stamp, msg))
-            while len(self.pending) > self.node.params["max_pending"]:
-                self._process(*self.pending.popleft(), final=True)
-            return
-        self._process(stamp, msg)
+        for stamp, taps, alpha in self.alignment.add_sample(stamp_to_ns(msg.header.stamp), msg):
+            self._process(stamp, taps, alpha)
 
-    def _process(self, stamp: int, msg: Any, final: bool = False) -> None:
-        alpha = self._alpha(stamp, final=True)
+    def _process(self, stamp: int, msg: Any, alpha: float | None) -> None:
         if alpha is None or not math.isfinite(alpha):
             self.counts["alpha_missing"] += 1
             cl = cd = cm = math.nan
@@ -159,7 +130,7 @@ class Lift:
         level = 1 if problems or excluded else 0
         values = {k: str(v) for k, v in self.counts.items()}
         values["excluded_taps"] = ", ".join(f"{k}: {v}" for k, v in excluded.items()) or "none"
-        values["pending"] = str(len(self.pending))
+        values["pending"] = str(self.alignment.pending_count)
         msg = diagnostic_array(
             self.node,
             f"{self.node.name}: pressure integration",
@@ -171,8 +142,8 @@ class Lift:
         self.diag.publish(msg)
 
     def close(self) -> None:
-        while self.pending:
-            self._process(*self.pending.popleft(), final=True)
+        for stamp, taps, alpha in self.alignment.flush():
+            self._process(stamp, taps, alpha)
         self.publish_diagnostics()
 
 

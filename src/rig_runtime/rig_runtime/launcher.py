@@ -5,16 +5,23 @@
 - SIGINT/SIGTERM are forwarded to every node (SIGINT first, as ros2 launch does; SIGTERM
   after ``--grace`` seconds; SIGKILL after twice that) and every child is reaped.
 - If a node exits non-zero, the others are stopped and the launcher exits non-zero, naming
-  the node and its exit code. A node with ``stops_graph: true`` stops the graph when it exits.
+  the node, its exit code and its own last error line (a bad parameter, a plan that does not
+  validate, a start barrier that timed out).
+- Node output goes to ``<log_dir>/<node>.log`` when a log directory is given (aero-rig
+  campaign), else to the launcher's stderr with a ``[node]`` prefix on every line, as
+  ``ros2 launch`` shows it. A node with ``stops_graph: true`` stops the graph when it exits.
 - ``--duration S`` stops the graph after S seconds (exit 0 if every node stopped cleanly).
 """
 
 import argparse
 import os
+import re
 import signal
 import subprocess
 import sys
+import threading
 import time
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,10 +35,48 @@ from .node import LAUNCHER_PID_ENV
 class NodeProcess:
     spec: NodeSpec
     process: subprocess.Popen[bytes]
+    log_path: Path | None = None
+    tail: deque[str] | None = None  # the last lines of its output (when forwarded)
+    reader: threading.Thread | None = None
 
     @property
     def returncode(self) -> int | None:
         return self.process.poll()
+
+    def output_tail(self) -> list[str]:
+        if self.tail is not None:
+            if self.reader is not None:
+                self.reader.join(timeout=1.0)  # the pipe closes when the process is gone
+            return list(self.tail)
+        if self.log_path is None or not self.log_path.exists():
+            return []
+        with self.log_path.open("rb") as f:
+            f.seek(max(0, f.seek(0, os.SEEK_END) - 16384))
+            return f.read().decode(errors="replace").splitlines()[-50:]
+
+    def error_line(self) -> str | None:
+        """The node's own last error: a [FATAL]/[ERROR] log line or a traceback's last line."""
+        for line in reversed(self.output_tail()):
+            text = line.strip()
+            if text.startswith(("[FATAL]", "[ERROR]")) or _EXCEPTION_LINE.match(text):
+                return text
+        return None
+
+
+_EXCEPTION_LINE = re.compile(r"^[A-Za-z_][\w.]*(Error|Exception|Interrupt)\b.*")
+
+
+def _forward(stream: Any, name: str, tail: deque[str]) -> None:
+    """Copy a node's output to our stderr, each line prefixed with the node's name."""
+    for raw in iter(stream.readline, b""):
+        line = raw.decode(errors="replace").rstrip("\n")
+        tail.append(line)
+        try:
+            sys.stderr.write(f"[{name}] {line}\n")
+            sys.stderr.flush()
+        except (OSError, ValueError):
+            pass
+    stream.close()
 
 
 def node_command(spec: NodeSpec, extra_overrides: dict[str, Any] | None = None) -> list[str]:
@@ -71,10 +116,12 @@ class Launcher:
     def start(self) -> None:
         for spec in self.graph.nodes:
             cmd = node_command(spec, self.overrides.get(spec.name))
-            stdout: Any = None
+            stdout: Any = subprocess.PIPE
+            log_path = None
             if self.log_dir is not None:
                 self.log_dir.mkdir(parents=True, exist_ok=True)
-                log = (self.log_dir / f"{spec.name}.log").open("wb")
+                log_path = self.log_dir / f"{spec.name}.log"
+                log = log_path.open("wb")
                 self._logs.append(log)
                 stdout = log
             # Own process group: a terminal's Ctrl-C reaches the launcher only, which then
@@ -85,7 +132,7 @@ class Launcher:
                 cmd,
                 env=self.env,
                 stdout=stdout,
-                stderr=subprocess.STDOUT if stdout else None,
+                stderr=subprocess.STDOUT,
                 process_group=0,
             )
             if spec.nice:  # relative to the launcher's own, like `nice -n` in the launch files
@@ -94,7 +141,14 @@ class Launcher:
                     os.setpriority(os.PRIO_PROCESS, process.pid, niceness)
                 except OSError:
                     pass  # the process already exited: poll() reports it
-            self.processes.append(NodeProcess(spec, process))
+            node = NodeProcess(spec, process, log_path)
+            if log_path is None:
+                node.tail = deque(maxlen=50)
+                node.reader = threading.Thread(
+                    target=_forward, args=(process.stdout, spec.name, node.tail), daemon=True
+                )
+                node.reader.start()
+            self.processes.append(node)
 
     def poll(self) -> str | None:
         """None while the graph should keep running; else why it must stop."""
@@ -104,6 +158,9 @@ class Launcher:
                 continue
             if code != 0:
                 self.failure = f"node {proc.spec.name!r} exited with code {code}"
+                line = proc.error_line()
+                if line:
+                    self.failure += f": {line}"
                 return self.failure
             if proc.spec.stops_graph:
                 return f"node {proc.spec.name!r} finished"

@@ -1,0 +1,98 @@
+"""The simulated actuator's silent-stream watchdog and command tracking, in-process."""
+
+import math
+from types import SimpleNamespace
+
+from pitch_actuator.actuator_common import CommandTracking
+from pitch_actuator.stream_watchdog import MAX_STEPS_PER_CALL, SilentStreamWatchdog
+from rig_runtime.anomaly import Anomaly, AnomalyLog
+
+
+def _watchdog() -> SilentStreamWatchdog:
+    return SilentStreamWatchdog(fs=200.0, stream_timeout_s=30.0, lost_timeout_s=0.25)
+
+
+def test_nothing_is_due_before_the_first_command() -> None:
+    wd = _watchdog()
+    assert wd.due(1000.0, publisher_present=False, stopped=True) == 0
+
+
+def test_a_slow_graph_with_its_generator_present_waits_for_the_stream_timeout() -> None:
+    wd = _watchdog()
+    wd.command(0.0)
+    assert wd.due(29.9, publisher_present=True, stopped=False) == 0  # pauses are harmless
+    assert wd.due(30.0, publisher_present=True, stopped=False) == 1
+    assert wd.due(30.1, publisher_present=True, stopped=False) == 21
+
+
+def test_a_departed_generator_trips_after_the_governor_watchdog() -> None:
+    wd = _watchdog()
+    wd.command(0.0)
+    assert wd.due(0.2, publisher_present=False, stopped=False) == 0
+    assert wd.due(0.25, publisher_present=False, stopped=False) == 1
+
+
+def test_a_stop_request_acts_within_two_samples() -> None:
+    wd = _watchdog()
+    wd.command(0.0)
+    assert wd.due(0.01, publisher_present=True, stopped=True) == 1
+
+
+def test_steps_are_counted_bounded_and_reset_by_a_command() -> None:
+    wd = _watchdog()
+    wd.command(0.0)
+    due = wd.due(40.0, publisher_present=True, stopped=False)
+    assert due == MAX_STEPS_PER_CALL  # a late timer catches up in bounded bursts
+    wd.stepped(due)
+    assert wd.running_on
+    assert wd.due(30.2, publisher_present=True, stopped=False) == 0  # already stepped past
+    assert wd.command(41.0) is True  # the command ends a free-run episode
+    assert not wd.running_on and wd.command(41.1) is False
+
+
+def _tracking(fs: float | None = 200.0) -> tuple[CommandTracking, list[Anomaly]]:
+    sent: list[Anomaly] = []
+    node = SimpleNamespace(anomalies=AnomalyLog("/sim_actuator", sent.append))
+    return CommandTracking(node, fs), sent  # type: ignore[arg-type]
+
+
+def test_followed_commands_report_nothing() -> None:
+    tracking, sent = _tracking()
+    for k in range(10):
+        tracking.command(k * 5_000_000, 1.0 + k, 1.0 + k)
+    assert sent == []
+
+
+def test_commands_not_followed_form_one_episode() -> None:
+    tracking, sent = _tracking()
+    tracking.command(0, 10.0, 10.0)
+    tracking.command(5_000_000, 40.0, 35.0)  # clamped to the limit
+    tracking.command(10_000_000, 40.0, 35.0)
+    tracking.command(15_000_000, math.nan, 35.0)  # refused
+    assert [(a.kind, a.last_ns) for a in sent] == [("not_tracking", None)]
+    tracking.command(20_000_000, 30.0, 30.0)
+    assert (sent[-1].first_ns, sent[-1].last_ns) == (5_000_000, 15_000_000)
+
+
+def test_stamp_jumps_are_time_discontinuities() -> None:
+    tracking, sent = _tracking()
+    tracking.command(0, 0.0, 0.0)
+    tracking.command(5_000_000, 0.0, 0.0)
+    tracking.command(20_000_000, 0.0, 0.0)  # two samples skipped
+    tracking.command(10_000_000, 0.0, 0.0)  # backwards
+    kinds = [(a.kind, a.first_ns, a.last_ns) for a in sent]
+    assert kinds == [
+        ("time_discontinuity", 5_000_000, 20_000_000),
+        ("time_discontinuity", 10_000_000, 20_000_000),
+    ]
+
+
+def test_watchdog_episode_ends_with_the_next_followed_command() -> None:
+    tracking, sent = _tracking(None)  # the rig: no fixed rate, no discontinuity check
+    tracking.command(1_000, 5.0, 5.0)
+    tracking.watchdog_tripped("no pitch command within the watchdog timeout")
+    assert sent[-1].kind == "watchdog" and sent[-1].last_ns is None
+    tracking.command(900_000_000, 6.0, 5.1)  # held: not followed yet
+    tracking.command(905_000_000, 6.0, 6.0)
+    watchdog = [a for a in sent if a.kind == "watchdog"]
+    assert (watchdog[-1].first_ns, watchdog[-1].last_ns) == (1_000, 905_000_000)
