@@ -27,9 +27,9 @@ from pathlib import Path
 from typing import Any
 
 from rig_runtime.graph import GraphError, GraphSpec, load_graph, package_share
-from rig_runtime.launcher import Launcher
+from rig_runtime.launcher import Launcher, parse_overrides
 
-from .verdict import run_problems
+from .verdict import data_quality_lines, run_problems
 
 EXIT_NOT_CLEAN = 3  # the campaign finished but lost or excluded data
 VIEW_MODES = ("spawn", "save", "serve", "off")  # "off": no view node (the node calls it "none")
@@ -110,18 +110,26 @@ class CampaignMonitor:
 def cmd_campaign(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    run_dir = _run_dir(args.out)
+    user_overrides = parse_overrides(args.overrides)
     graph = load_graph(Path(args.graph) if args.graph else _config("sim.yaml"))
+    run_dir = _run_dir(args.out)
     rrd = run_dir / "campaign.rrd" if args.rerun == "save" else None
     graph = _with_view(graph, args.rerun, rrd)
     plan = args.plan
     if plan not in ("default", "short"):
         plan = str(Path(plan).resolve())
-    overrides = {
-        "generator": {"plan": plan, "seed": args.seed, "real_time_factor": args.real_time_factor},
-        "recorder": {"output": str(run_dir / "bag")},
-        "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
-    }
+    overrides = _merge(
+        {
+            "generator": {
+                "plan": plan,
+                "seed": args.seed,
+                "real_time_factor": args.real_time_factor,
+            },
+            "recorder": {"output": str(run_dir / "bag")},
+            "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
+        },
+        user_overrides,
+    )
     env = {"RIG_RUNTIME_BACKEND": "dds"}
     os.environ.update(env)
     print(f"aero-rig: campaign '{args.plan}' -> {run_dir}", file=sys.stderr)
@@ -232,7 +240,18 @@ def cmd_run(args: argparse.Namespace) -> int:
         overrides["recorder"] = {"output": str(out / "bag")}
         overrides["identifier"] = {"output_dir": str(out)}
         print(f"aero-rig: recording to {out / 'bag'}", file=sys.stderr)
+    overrides = _merge(overrides, parse_overrides(args.overrides))
     return Launcher(graph, overrides=overrides).run(args.duration)
+
+
+def _merge(
+    base: dict[str, dict[str, Any]], extra: dict[str, dict[str, Any]]
+) -> dict[str, dict[str, Any]]:
+    """Per-node parameter overrides, ``extra`` (the user's -p) winning."""
+    out = {name: dict(values) for name, values in base.items()}
+    for name, values in extra.items():
+        out.setdefault(name, {}).update(values)
+    return out
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
@@ -248,11 +267,28 @@ def cmd_fit(args: argparse.Namespace) -> int:
         print(f"aero-rig fit: warning: {warning}", file=sys.stderr)
     tables = result.tables()
     print(f"{data.messages} samples read from {args.bag}")
+    print("realizations in the bag (valid periods / periods):")
+    for (level, m), block in sorted(data.assembler.blocks.items()):
+        valid = int(block.period_valid().sum())
+        state = "complete" if valid == block.P else ("incomplete" if valid else "none")
+        print(f"  level {level} realization {m}: {valid}/{block.P} ({state})")
     print("\nTable 1, trained on all levels:")
     print(tables["all_levels"][0])
     print("\nTable 1, trained on level 1 only:")
     print(tables["level1"][0])
     print(f"\nreport: {out.resolve()}")
+    problems = data_quality_lines(result.data_quality)
+    if problems:
+        print(f"\nDATA NOT CLEAN: {len(problems)} problem(s); Table 1 uses only what was left:")
+        for line in problems[:40]:
+            print(f"  - {line}")
+        if not args.allow_excluded:
+            print(
+                "aero-rig fit: the bag lost or excluded data (above); exit code 3. Pass "
+                "--allow-excluded to accept it.",
+                file=sys.stderr,
+            )
+            return EXIT_NOT_CLEAN
     return 0
 
 
@@ -269,6 +305,17 @@ def cmd_view(args: argparse.Namespace) -> int:
 
     view_bag(args.source, rrd_path=args.save, spawn=not args.save)
     return 0
+
+
+def _add_override_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "-p",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="NODE.PARAM:=VALUE",
+        help="set a node parameter, as rig-launch -p (e.g. -p sim_wing.seed:=3); repeatable",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -294,6 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="exit 0 even if data were lost or excluded (they are still listed)",
     )
+    _add_override_option(p)
     p.set_defaults(func=cmd_campaign)
 
     p = sub.add_parser("run", help="run the sim or rig graph until Ctrl-C")
@@ -302,11 +350,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     p.add_argument("--out", default=None, help="run directory for the bag and the report")
     p.add_argument("--rerun", choices=VIEW_MODES, default="off", help="live Rerun view")
+    _add_override_option(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("fit", help="offline fit of a recorded bag (MCAP or sqlite3)")
     p.add_argument("bag", help="rosbag2 directory")
     p.add_argument("--out", default=None, help="report directory (default <bag>/../offline_fit)")
+    p.add_argument(
+        "--allow-excluded",
+        action="store_true",
+        help="exit 0 even if data were lost or excluded (they are still listed)",
+    )
     p.set_defaults(func=cmd_fit)
 
     p = sub.add_parser("view", help="Rerun view of a bag or of the live graph")

@@ -86,8 +86,9 @@ class PitchAlignment:
         """Pitch at ``stamp_ns``: None = not known yet (may come), NaN = cannot be known.
 
         ``final``: no later pitch will be waited for, so a stamp at most ``max_gap_ns`` after
-        the newest state takes the newest value, and one before the history gives NaN. Without
-        any pitch at all it stays None (the caller treats it as NaN).
+        the newest state takes the newest value. A stamp before the history is decided at once
+        (the oldest value within ``max_gap_ns``, else NaN). Without any pitch at all it stays
+        None (the caller treats it as NaN).
         """
         exact = self.by_stamp.get(stamp_ns)
         if exact is not None:
@@ -101,7 +102,10 @@ class PitchAlignment:
         if stamps[i] == stamp_ns:
             return self.values[i]
         if i == 0:
-            return None if not final else math.nan
+            # Before the oldest state: pitch stamps only grow, so waiting cannot help (a sample
+            # left waiting here would hold up every sample behind it). Within the gap the
+            # oldest state stands for it, as the newest does after the end.
+            return self.values[0] if stamps[0] - stamp_ns <= self.max_gap_ns else math.nan
         s0, s1 = stamps[i - 1], stamps[i]
         if s1 - s0 > self.max_gap_ns:
             return math.nan

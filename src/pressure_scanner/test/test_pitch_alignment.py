@@ -82,12 +82,19 @@ def test_overflow_without_any_pitch_gives_nan() -> None:
     assert align.alpha(0, final=True) is None  # as the node always had it: None = not known
 
 
-def test_stamp_before_the_history_waits_unless_final() -> None:
-    align = PitchAlignment(max_gap_ns=10 * MS, max_pending=10)
-    align.add_pitch(10 * MS, 1.0)
-    align.add_pitch(20 * MS, 2.0)
-    assert align.alpha(9 * MS, final=False) is None
-    assert math.isnan(align.alpha(9 * MS, final=True))
+def test_stamp_before_the_history_is_decided_at_once_and_blocks_nothing() -> None:
+    """Pitch stamps only grow: a sample older than the oldest state can never get a better
+    answer, so it must not wait (it would hold every later sample in the queue: the rig's
+    scanner starting before its actuator would give NaN coefficients for the whole run)."""
+    align = PitchAlignment(max_gap_ns=10 * MS, max_pending=5000)
+    align.add_pitch(100 * MS, 1.0)
+    align.add_pitch(110 * MS, 2.0)
+    assert align.alpha(95 * MS, final=False) == 1.0  # within the gap: the oldest state
+    assert math.isnan(align.alpha(50 * MS, final=False))
+    (early,) = align.add_sample(50 * MS, "early")
+    assert early[1] == "early" and math.isnan(early[2])
+    assert align.add_sample(105 * MS, "later") == [(105 * MS, "later", pytest.approx(1.5))]
+    assert align.pending_count == 0
 
 
 def test_out_of_order_and_repeated_pitch_stamps_are_ignored() -> None:
@@ -116,13 +123,13 @@ def test_flush_releases_everything_pending_as_final() -> None:
 
 
 def test_history_is_bounded_and_the_exact_lookup_with_it() -> None:
-    align = PitchAlignment(max_gap_ns=10 * MS, max_pending=10, history=3)
+    align = PitchAlignment(max_gap_ns=5 * MS, max_pending=10, history=3)
     for k in range(10):
         align.add_pitch(k * MS, float(k))
         assert len(align.by_stamp) <= 3
     assert list(align.stamps) == [7 * MS, 8 * MS, 9 * MS]
     assert sorted(align.by_stamp) == list(align.stamps)
-    assert align.alpha(0, final=False) is None  # dropped: no longer known exactly
+    assert math.isnan(align.alpha(0, final=False))  # dropped: can no longer be known
     assert math.isnan(align.alpha(0, final=True))
     assert align.alpha(8 * MS, final=False) == 8.0
 

@@ -237,7 +237,8 @@ def _log(text: str) -> None:
     print(f"[rig-launch] {text}", file=sys.stderr, flush=True)
 
 
-def _parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
+def parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
+    """``NODE.PARAM:=VALUE`` items (VALUE in YAML) as {node: {param: value}}."""
     import yaml
 
     result: dict[str, dict[str, Any]] = {}
@@ -261,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         graph = load_graph(args.graph)
-        launcher = Launcher(graph, overrides=_parse_overrides(args.overrides), grace_s=args.grace)
+        launcher = Launcher(graph, overrides=parse_overrides(args.overrides), grace_s=args.grace)
         for spec in graph.nodes:
             entry_point(spec.package, spec.executable)  # fail before starting anything
     except GraphError as exc:
