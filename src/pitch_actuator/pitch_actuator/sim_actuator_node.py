@@ -92,6 +92,12 @@ class SimActuator:
             "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream", required=True
         )
         node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
+        # After the plan's end the generator may leave: running on is then the expected end of
+        # the run, not an anomaly of the experiment.
+        node.create_subscription(
+            "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events"
+        )
+        self.plan_ended = False
         self.t_origin_ns: int | None = None
         self.last_stamp_ns: int | None = None
         self.watchdog = SilentStreamWatchdog(
@@ -129,6 +135,10 @@ class SimActuator:
         self.tracking.command(stamp_ns, math.degrees(commanded), math.degrees(setpoint))
         self._step_and_publish(setpoint, stamp_ns)
 
+    def on_segment(self, msg: Any) -> None:
+        if '"plan_end"' in msg.data:
+            self.plan_ended = True
+
     def on_stop(self, msg: Any) -> None:
         t = self._time_s(self.last_stamp_ns or time.time_ns())
         if msg.data:
@@ -145,6 +155,19 @@ class SimActuator:
         now = time.monotonic()
         due = self.watchdog.due(now, present, self.governor.stopped)
         if not due:
+            return
+        if self.plan_ended:
+            if not self.watchdog.running_on:
+                self.node.logger.info(
+                    "the plan has ended and its commands stopped: holding, then ramping to the "
+                    "safe angle in real time"
+                )
+            for _ in range(due):
+                stamp_ns = self.last_stamp_ns + round(1e9 / self.fs)
+                self._step_and_publish(
+                    math.radians(self.governor.update(self._time_s(stamp_ns))), stamp_ns
+                )
+                self.watchdog.stepped()
             return
         if not self.watchdog.running_on:
             first_ns = self.last_stamp_ns + round(1e9 / self.fs)

@@ -15,6 +15,7 @@
 """
 
 import ctypes
+import ctypes as ct
 import os
 import threading
 import time
@@ -34,7 +35,7 @@ from cyclonedds.core import (
     WaitSet,
 )
 from cyclonedds.domain import Domain, DomainParticipant
-from cyclonedds.internal import DDS
+from cyclonedds.internal import DDS, dds_c_t
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
@@ -177,6 +178,23 @@ class _FlushQueue:
             pub.flush()
 
 
+def _matched_handles(entity: Any, getter: Callable[..., int]) -> list[int]:
+    """Instance handles of the endpoints matched to a reader or writer.
+
+    cyclonedds' own get_matched_* sizes its buffer by a first call and fails (IndexError) when
+    a match arrives between the two calls; here the buffer grows until the answer fits.
+    """
+    capacity = 16
+    while True:
+        buffer = (dds_c_t.instance_handle * capacity)()
+        ret = getter(entity._ref, ct.cast(buffer, ct.POINTER(dds_c_t.instance_handle)), capacity)
+        if ret < 0:
+            raise DDSException(ret, "getting matched endpoints")
+        if ret <= capacity:
+            return [buffer[i] for i in range(ret)]
+        capacity = ret + 16
+
+
 class _MatchedGids:
     """GIDs of an endpoint's matched remote endpoints, cached by instance handle."""
 
@@ -188,7 +206,10 @@ class _MatchedGids:
         for h in handles:
             gid = self.by_handle.get(h)
             if gid is None:
-                data = lookup(h)
+                try:
+                    data = lookup(h)
+                except DDSException:
+                    data = None
                 if data is None:
                     continue  # unmatched in between
                 gid = self.by_handle[h] = str(data.key)
@@ -238,13 +259,14 @@ class DdsPublisher:
         if ret < 0:
             raise DDSException(ret, f"flushing the writer of {self.topic}")
 
+    def matched(self) -> list[int]:
+        return _matched_handles(self.writer, self.writer._get_matched_subscriptions)
+
     def subscription_count(self) -> int:
-        return len(self.writer.get_matched_subscriptions())
+        return len(self.matched())
 
     def endpoint(self) -> Endpoint:
-        gids = self._matched.gids(
-            self.writer.get_matched_subscriptions(), self.writer.get_matched_subscription_data
-        )
+        gids = self._matched.gids(self.matched(), self.writer.get_matched_subscription_data)
         return _endpoint(self.topic, "writer", self.writer, self.profile, gids)
 
 
@@ -259,13 +281,14 @@ class DdsSubscription:
     profile: QosProfile = PROFILES["default"]
     _matched: _MatchedGids = field(default_factory=_MatchedGids)
 
+    def matched(self) -> list[int]:
+        return _matched_handles(self.reader, self.reader._get_matched_publications)
+
     def publisher_count(self) -> int:
-        return len(self.reader.get_matched_publications())
+        return len(self.matched())
 
     def endpoint(self) -> Endpoint:
-        gids = self._matched.gids(
-            self.reader.get_matched_publications(), self.reader.get_matched_publication_data
-        )
+        gids = self._matched.gids(self.matched(), self.reader.get_matched_publication_data)
         return _endpoint(self.topic, "reader", self.reader, self.profile, gids)
 
     def drain(self) -> int:

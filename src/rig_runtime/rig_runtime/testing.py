@@ -179,3 +179,72 @@ class Processes:
         tb: TracebackType | None,
     ) -> None:
         self.stop_all()
+
+
+# -- fault injection (tests/test_faults.py, tests/test_campaign.py, bench/faults.py) --------------
+
+# A node process is recognised by its module in the launcher's bootstrap command line.
+NODE_MODULES = {
+    "generator": "multisine_gen.generator_node",
+    "sim_actuator": "pitch_actuator.sim_actuator_node",
+    "sim_wing": "pressure_scanner.sim_wing_node",
+    "lift": "pressure_scanner.lift_node",
+    "identifier": "aero_identification.identifier_node",
+    "recorder": "rig_runtime.recorder",
+}
+
+
+def node_process(root_pid: int, node: str) -> Any:
+    """The psutil.Process of a graph node started under ``root_pid`` (None if not running)."""
+    import psutil
+
+    module = NODE_MODULES[node]
+    for child in descendants(root_pid):
+        try:
+            if any(f"from {module} import" in part for part in child.cmdline()):
+                return child
+        except psutil.Error:
+            continue
+    return None
+
+
+class BusyProcesses:
+    """``count`` CPU-bound processes at niceness ``nice`` (a loaded machine), each ending by
+    itself after ``limit_s`` and killed when the context exits."""
+
+    def __init__(self, count: int, nice: int = 0, limit_s: float = 900.0) -> None:
+        self.count = count
+        self.nice = nice
+        self.limit_s = limit_s
+        self.procs: list[subprocess.Popen[bytes]] = []
+
+    def __enter__(self) -> "BusyProcesses":
+        code = (
+            f"import time\nend = time.monotonic() + {self.limit_s}\n"
+            "while time.monotonic() < end: pass"
+        )
+        for _ in range(self.count):
+            proc = subprocess.Popen([sys.executable, "-c", code])
+            self.procs.append(proc)
+            if self.nice:
+                try:
+                    os.setpriority(os.PRIO_PROCESS, proc.pid, self.nice)
+                except OSError:
+                    pass
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        for proc in self.procs:
+            proc.kill()
+        for proc in self.procs:
+            proc.wait(timeout=10)
+
+
+def pause(proc: Any, seconds: float) -> None:
+    """SIGSTOP a process for ``seconds`` (a node frozen by the OS, a debugger, swapping), then
+    SIGCONT it; it is continued even if the wait is interrupted."""
+    proc.suspend()
+    try:
+        time.sleep(seconds)
+    finally:
+        proc.resume()
