@@ -17,13 +17,18 @@ from rig_runtime.messages import stamp_to_ns
 from rig_runtime.testing import (
     BusyProcesses,
     descendants,
+    finish,
     graph_env,
     node_process,
     pause,
     process_gone,
+    start_session,
     wait_for,
 )
 from rosbags.highlevel import AnyReader
+
+CLI = (sys.executable, "-m", "aero_rig.cli")
+RTF5 = ("--real-time-factor", "5")
 
 
 def _aero_rig(*args: str, env: dict[str, str], timeout: float) -> subprocess.CompletedProcess[str]:
@@ -193,17 +198,27 @@ def test_offline_fit_gives_the_same_table(campaign, tmp_path: Path) -> None:
     ).read_text().strip()
 
 
-def test_fit_of_bag_with_corrupted_tail_warns_and_fits(campaign, tmp_path: Path) -> None:
+def test_fit_of_bag_with_a_damaged_file_warns_and_fits(campaign, tmp_path: Path) -> None:
+    """A file of the bag lost its second half and footer (a disk error, a copy cut short): the
+    fit reads the rest with a warning, lists the samples that are missing because of it and
+    fails unless that is accepted."""
     run, _ = campaign
     bag = tmp_path / "damaged"
     shutil.copytree(run / "bag", bag)
-    files = sorted(bag.glob("*.mcap"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
-    last = files[-1]
-    data = last.read_bytes()
-    last.write_bytes(data[: len(data) // 2])  # the last file loses its second half and footer
+    largest = max(bag.glob("*.mcap"), key=lambda p: p.stat().st_size)  # it holds stream data
+    data = largest.read_bytes()
+    largest.write_bytes(data[: len(data) // 2])
     proc = _aero_rig("fit", str(bag), "--out", str(tmp_path / "fit"), env=graph_env(), timeout=600)
-    assert proc.returncode == 0, proc.stderr
+    # What the damage cost is listed, and the fit fails unless that is accepted explicitly.
+    assert proc.returncode == 3, proc.stderr
     assert "warning" in proc.stderr and "damaged" in proc.stderr
+    assert "DATA NOT CLEAN" in proc.stdout and "plan samples missing" in proc.stdout
+    proc = _aero_rig(
+        *("fit", str(bag), "--out", str(tmp_path / "fit"), "--allow-excluded"),
+        env=graph_env(),
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "fit" / "table1_all_levels.md").exists()
 
 
@@ -218,16 +233,9 @@ def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
     """SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run: the credit stalls the
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed."""
     run = tmp_path / "run"
-    proc = subprocess.Popen(
-        [
-            *(sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", "short"),
-            *("--out", str(run), "--quiet", "--timeout", "600"),
-        ],
-        env=graph_env(),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
+    proc = start_session(
+        [*CLI, "campaign", "--plan", "short", "--out", str(run), "--quiet", "--timeout", "600"],
+        graph_env(),
     )
     paused = []
     try:
@@ -239,11 +247,8 @@ def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
                 break
             pause(target, 3.0)
             paused.append(node)
-        out, err = proc.communicate(timeout=600)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        out, err = finish(proc, 600)
     assert len(paused) >= 4, f"the run ended before most pauses: {paused}"
     assert proc.returncode == 0, out[-3000:] + err[-3000:]
     _assert_lossless_and_identical(run, campaign[0])
@@ -321,16 +326,9 @@ def test_sigterm_stops_the_campaign_and_every_node_and_keeps_the_bag(tmp_path: P
     import psutil
 
     run = tmp_path / "run"
-    proc = subprocess.Popen(
-        [
-            *(sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", "short"),
-            *("--out", str(run), "--quiet", "--real-time-factor", "5"),
-        ],
-        env=graph_env(),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
+    proc = start_session(
+        [*CLI, "campaign", "--plan", "short", "--out", str(run), "--quiet", *RTF5],
+        graph_env(),
     )
     nodes: list[psutil.Process] = []
     try:

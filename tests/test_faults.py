@@ -7,7 +7,6 @@ in test_campaign.py; bench/faults.py runs every case on the short plan with figu
 """
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -19,7 +18,15 @@ import yaml
 from multisine_gen.plan import build_plan
 from rig_runtime.graph import load_graph, package_share
 from rig_runtime.launcher import Launcher, node_command
-from rig_runtime.testing import graph_env, join_graph, node_process, pause, wait_for
+from rig_runtime.testing import (
+    finish,
+    graph_env,
+    join_graph,
+    node_process,
+    pause,
+    start_session,
+    wait_for,
+)
 from rosbags.highlevel import AnyReader
 
 from rig_runtime import Node
@@ -54,23 +61,7 @@ def small_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _campaign(*args: str, env: dict[str, str]) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "aero_rig.cli", "campaign", "--quiet", *args],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-
-
-def _finish(proc: subprocess.Popen[str], timeout: float) -> tuple[str, str]:
-    try:
-        return proc.communicate(timeout=timeout)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+    return start_session([sys.executable, "-m", "aero_rig.cli", "campaign", "--quiet", *args], env)
 
 
 def _log_has(path: Path, text: str) -> bool:
@@ -102,7 +93,7 @@ def test_a_node_that_never_becomes_ready_stops_the_start_and_nothing_moves(
         *("-p", "generator.barrier_nodes:=[sim_actuator, sim_wing, lift, identifier, recorder]"),
         env=graph_env(),
     )
-    _, err = _finish(proc, 120)
+    _, err = finish(proc, 120)
     assert proc.returncode == 1, err
     assert time.monotonic() - started < 60
     # The campaign prints the generator's own error line, which names the missing node.
@@ -180,12 +171,9 @@ def test_killing_the_lift_node_stops_the_campaign_and_the_bag_fits(
         assert lift is not None
         lift.kill()
         killed = time.monotonic()
-        _, err = proc.communicate(timeout=120)
-        stopped_after = time.monotonic() - killed
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        _, err = finish(proc, 120)
+    stopped_after = time.monotonic() - killed
     assert proc.returncode == 1
     assert "node 'lift' exited with code -9" in err, err
     assert stopped_after < 20, stopped_after
@@ -245,12 +233,9 @@ def test_a_free_running_actuator_is_reported_excluded_and_fails_the_campaign(
         generator = node_process(proc.pid, "generator")
         assert generator is not None
         pause(generator, 3.0)
-        out, err = proc.communicate(timeout=300)
     finally:
         watcher.close()
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        out, err = finish(proc, 300)
     assert proc.returncode == 3, out[-3000:] + err[-3000:]
     assert "DATA NOT CLEAN" in out and "sim_actuator free_run" in out, out
     quality = json.loads((run / "models.json").read_text())["data_quality"]
@@ -259,3 +244,15 @@ def test_a_free_running_actuator_is_reported_excluded_and_fails_the_campaign(
     assert any("free_run" in p for p in quality["excluded_periods"] + quality["excluded_sines"])
     assert (run / "table1_all_levels.md").read_text().startswith("> **Data not clean**")
     assert "free_run" in (run / "data_quality.md").read_text()
+
+
+def test_a_node_failing_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:
+    bad = tmp_path / "plan.json"
+    bad.write_text("{}")
+    proc = _campaign("--plan", str(bad), "--out", str(tmp_path / "run"), env=graph_env())
+    _, err = finish(proc, 120)
+    assert proc.returncode == 1
+    assert (
+        "campaign failed: node 'generator' exited with code 2: [FATAL] [/generator]: "
+        "not an experiment plan"
+    ) in err, err

@@ -16,9 +16,11 @@
 
 import ctypes
 import ctypes as ct
+import logging
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -51,6 +53,8 @@ from .qos import PROFILES, QosProfile
 # or starved process). Longer than Cyclone's participant lease (10 s): a reader that is gone
 # for good is unmatched by then and the writer goes on; one that is only paused catches up.
 WRITE_BLOCKING_S = 60
+_REDELIVERY_WINDOW = 4096  # samples per writer remembered to recognise a redelivery
+_log = logging.getLogger("rig.dds")
 _ANY_STATE = SampleState.Any | ViewState.Any | InstanceState.Any
 _TAKE_BATCH = 256
 
@@ -280,9 +284,57 @@ class DdsSubscription:
     raw: bool
     profile: QosProfile = PROFILES["default"]
     _matched: _MatchedGids = field(default_factory=_MatchedGids)
+    _recent: dict[str | int, tuple[deque[int], set[int]]] = field(default_factory=dict)
+    _writer_gid: dict[int, str] = field(default_factory=dict)
+    redeliveries: int = 0
 
     def matched(self) -> list[int]:
         return _matched_handles(self.reader, self.reader._get_matched_publications)
+
+    def _writer_key(self, handle: int) -> str | int:
+        """The matched writer's GUID (stable if DDS rediscovers the writer under a new handle);
+        the handle itself when the writer is no longer matched."""
+        key = self._writer_gid.get(handle)
+        if key is None:
+            try:
+                data = self.reader.get_matched_publication_data(handle)
+            except DDSException:
+                data = None
+            if data is None:
+                return handle
+            key = self._writer_gid[handle] = str(data.key)
+        return key
+
+    def _redelivered(self, info: Any) -> bool:
+        """Whether this sample was delivered before: same writer, same source timestamp.
+
+        Seen under SIGSTOP of nodes (2 of 15 paused-node campaigns before this filter, keyed
+        then by the writer's instance handle, which changes if DDS rediscovers the writer):
+        one reader got a run of a writer's samples twice, the other readers once. Keyed by the
+        writer's GUID since, 0 of 10. A node that publishes the same stamp twice writes twice
+        (two source timestamps) and is not affected: the identification still sees and
+        reports such duplicates.
+        """
+        writer = self._writer_key(info.publication_handle)
+        recent = self._recent.get(writer)
+        if recent is None:
+            recent = self._recent[writer] = (deque(), set())
+        order, seen = recent
+        ts = info.source_timestamp
+        if ts in seen:
+            self.redeliveries += 1
+            _log.warning(
+                "%s: dropped a sample delivered twice by DDS (same writer and source time; "
+                "%d so far)",
+                self.topic,
+                self.redeliveries,
+            )
+            return True
+        order.append(ts)
+        seen.add(ts)
+        if len(order) > _REDELIVERY_WINDOW:
+            seen.discard(order.popleft())
+        return False
 
     def publisher_count(self) -> int:
         return len(self.matched())
@@ -303,6 +355,8 @@ class DdsSubscription:
         delivered = 0
         for data, info in batch:
             if not info.valid_data:  # dispose/unregister notifications carry no sample
+                continue
+            if self.profile.reliability == "reliable" and self._redelivered(info):
                 continue
             if self.raw:
                 self.callback((data, time.time_ns()))

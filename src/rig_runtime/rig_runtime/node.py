@@ -242,6 +242,9 @@ class Node:
         once the node is constructed)."""
         if self._ready_pub is not None:
             return
+        # The anomaly writer exists before the node reports ready, so the barrier sees it matched
+        # to the identifier and the recorder: a first anomaly record is never sent into the void.
+        _ = self.anomalies
         self._ready_pub = self.create_publisher(READY_TYPE, READY_TOPIC, "latched")
         self._announce()
         self.create_timer(period_s, self._announce)

@@ -248,3 +248,27 @@ def pause(proc: Any, seconds: float) -> None:
         time.sleep(seconds)
     finally:
         proc.resume()
+
+
+def start_session(args: Sequence[str], env: dict[str, str]) -> "subprocess.Popen[str]":
+    """Start a command in its own session (a graph under it can be killed as one group), with
+    text pipes for its output; pair with :func:`finish`."""
+    return subprocess.Popen(
+        list(args),
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def finish(proc: "subprocess.Popen[str]", timeout_s: float) -> tuple[str, str]:
+    """Wait for a :func:`start_session` process (bounded); its whole group is killed if it is
+    still running then, or if the wait is interrupted. Returns (stdout, stderr)."""
+    try:
+        return proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()

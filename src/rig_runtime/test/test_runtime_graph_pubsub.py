@@ -119,3 +119,32 @@ def test_writes_outside_a_turn_leave_at_once(tmp_path: Path, monkeypatch: Any) -
         worker.join(10)
 
     _publish_then_idle(tmp_path, monkeypatch, from_a_thread)
+
+
+def test_a_sample_delivered_twice_is_dropped_but_a_second_write_is_not(
+    monkeypatch: Any,
+) -> None:
+    """Redelivery of one DDS sample (same writer, same source time) is a transport artifact;
+    a node writing the same message twice is two samples, and both arrive."""
+    from types import SimpleNamespace
+
+    join_graph(graph_env(), monkeypatch.setenv)
+    node = Node("dup_check", argv=[], backend="dds")
+    try:
+        got: list[int] = []
+        sub = node.create_subscription(
+            "std_msgs/msg/Int32", "/dup_check", lambda m: got.append(int(m.data)), "stream"
+        )
+        pub = node.create_publisher("std_msgs/msg/Int32", "/dup_check", "stream")
+        assert node.spin_until(lambda: pub.subscription_count() > 0, 30)
+        msg = node.new_message("std_msgs/msg/Int32", data=7)
+        pub.publish(msg)
+        pub.publish(msg)  # the same message, written twice
+        assert node.spin_until(lambda: len(got) == 2, 10), got
+        info = SimpleNamespace(publication_handle=1, source_timestamp=123)
+        assert not sub._redelivered(info)  # type: ignore[attr-defined]
+        assert sub._redelivered(info)  # type: ignore[attr-defined]
+        assert not sub._redelivered(SimpleNamespace(publication_handle=2, source_timestamp=123))  # type: ignore[attr-defined]
+        assert sub.redeliveries == 1  # type: ignore[attr-defined]
+    finally:
+        node.close()

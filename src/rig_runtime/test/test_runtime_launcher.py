@@ -66,6 +66,23 @@ def test_crashing_node_stops_graph_nonzero_naming_it(tmp_path: Path) -> None:
     assert json.loads(result.read_text())["received"] == 200
 
 
+def test_a_node_failing_at_start_is_named_with_its_own_error_line(tmp_path: Path) -> None:
+    """A bad parameter: the launcher's last line carries the node's own [FATAL] line, and the
+    node's output is shown with its [name] prefix, as ros2 launch shows it."""
+    result = tmp_path / "listener.json"
+    graph = _graph(tmp_path, 0, result)
+    proc = _launch(graph, "-p", "talker.count:=-5")
+    try:
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode != 0
+    last = [line for line in err.splitlines() if line.startswith("[rig-launch] error")][-1]
+    assert "node 'talker' exited with code 2: [FATAL] [talker]: parameter 'count'" in last, err
+    assert "[talker] [FATAL]" in err
+
+
 def test_duration_and_sigterm_reap_every_child(tmp_path: Path) -> None:
     result = tmp_path / "listener.json"
     graph = _graph(tmp_path, 0, result)
