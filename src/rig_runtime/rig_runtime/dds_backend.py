@@ -311,7 +311,8 @@ class DdsSubscription:
         Seen under SIGSTOP of nodes (2 of 15 paused-node campaigns before this filter, keyed
         then by the writer's instance handle, which changes if DDS rediscovers the writer):
         one reader got a run of a writer's samples twice, the other readers once. Keyed by the
-        writer's GUID since, 0 of 10. A node that publishes the same stamp twice writes twice
+        writer's GUID since; no duplicate in 10 runs after that, so whether this filter is what
+        stopped it is not established. A node that publishes the same stamp twice writes twice
         (two source timestamps) and is not affected: the identification still sees and
         reports such duplicates.
         """
