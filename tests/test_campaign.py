@@ -131,6 +131,9 @@ def test_campaign_ends_by_itself_with_report(campaign) -> None:
     for name in ("models.json", "table1_all_levels.md", "table1_level1.csv", "campaign.json"):
         assert (run / name).exists(), name
     assert list(run.glob("frf_*.png")) and list(run.glob("cl_alpha_*.png"))
+    # Stopped with the graph, the recorder closed the bag once the publishers had left, not on
+    # its drain timeout (which would mean it waited for itself or for a node that hung).
+    assert "still published" not in (run / "logs" / "recorder.log").read_text()
 
 
 def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
@@ -309,14 +312,15 @@ def test_killing_the_identifier_stops_the_campaign_with_a_clear_error(tmp_path: 
         time.sleep(4.0)
         target = identifier()
         assert target is not None
+        workers = target.children(recursive=True)  # its refit worker
+        assert workers
         target.kill()
-        _, err = proc.communicate(timeout=120)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        _, err = finish(proc, 120)
     assert proc.returncode != 0
     assert re.search(r"node 'identifier' exited with code -9", err), err
+    # The refit worker does not outlive its node, even killed with SIGKILL.
+    assert wait_for(lambda: all(process_gone(w) for w in workers), 10), workers
     with AnyReader([run / "bag"]) as reader:  # the bag up to the failure is readable
         assert reader.message_count > 0
 

@@ -132,7 +132,9 @@ class Identifier:
 
     def _start_worker(self) -> None:
         self.executor = ProcessPoolExecutor(
-            max_workers=1, mp_context=multiprocessing.get_context("spawn")
+            max_workers=1,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=refit_worker.exit_with_parent,
         )
         # Start the worker now: its imports and compiled kernels load while the first
         # realization streams in, not inside the first refit. A failure shows at the refit.

@@ -55,6 +55,23 @@ def _reset_peak_rss() -> None:
         pass
 
 
+def exit_with_parent(poll_s: float = 0.5) -> None:
+    """Worker initializer: leave when the identifier node is gone, even if it was killed with
+    SIGKILL (a ProcessPoolExecutor worker would otherwise wait on its queue forever, holding
+    hundreds of MB)."""
+    import os
+    import threading
+
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
 def warm_up() -> float:
     """Load the pipeline and its compiled kernels (see pipeline.warm_up); returns seconds."""
     from .pipeline import warm_up as pipeline_warm_up

@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 from .bag import SplitBagWriter
-from .barrier import READY_TOPIC
 from .node import Node, run_node
 from .params import Parameter
 from .qos import QosProfile
@@ -92,14 +91,24 @@ class Recorder:
         self.node.logger.info("recording %s [%s]", topic, type_name)
 
     def _publishing(self) -> list[str]:
-        """Recorded topics that still have a publisher."""
+        """Recorded topics that still have a publisher other than this node itself (every
+        node writes /graph/ready and /experiment/anomaly, the recorder too)."""
+        endpoints = self.node.readiness_report().endpoints
+        own = {e.gid for e in endpoints if e.kind == "writer"}
+        own_count: dict[str, int] = {}
+        for e in endpoints:
+            if e.kind == "writer":
+                own_count[e.topic] = own_count.get(e.topic, 0) + 1
         out = []
-        for topic, sub in self.subscriptions.items():
-            if topic == READY_TOPIC:  # this node's own writer is one of them
+        for e in endpoints:
+            if e.kind != "reader" or e.topic not in self.subscriptions:
                 continue
-            count = getattr(sub, "publisher_count", None) or sub.get_publisher_count
-            if count() > 0:
-                out.append(topic)
+            if e.matched is not None:
+                others = set(e.matched) - own
+            else:  # rclpy: counts only
+                others = set(range(e.matched_count - own_count.get(e.topic, 0)))
+            if others:
+                out.append(e.topic)
         return out
 
     def close(self) -> None:
