@@ -25,8 +25,8 @@ def _assemble(campaign, drop: int | None = None, duplicate: int | None = None) -
         keep[drop] = False
     asm.add_many("u", stamps[keep], u[keep])
     asm.add_many("y", stamps, y)
-    if duplicate is not None:
-        asm.add("y", int(stamps[duplicate]), float(y[duplicate]))
+    if duplicate is not None:  # the same stamp again with another value: a conflict
+        asm.add("y", int(stamps[duplicate]), float(y[duplicate]) + 0.01)
     return asm
 
 
@@ -127,6 +127,19 @@ def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> No
     assert not block.period_valid()[2]
 
 
+def test_a_sample_delivered_twice_excludes_nothing(campaign) -> None:
+    plan, stamps, u, y = campaign
+    seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 1)
+    asm = _assemble(campaign)
+    k = seg["start_k"] + 40
+    asm.add("y", int(stamps[k]), float(y[k]))  # a transport redelivery: identical
+    asm.add("u", int(stamps[k]), float(u[k]))
+    assert asm.blocks[(seg["level"], seg["realization"])].period_valid().all()
+    result = identify(asm, IdentificationConfig(max_iter=2), final=True)
+    assert result.data_quality["clean"]
+    assert result.data_quality["samples"]["C_l"]["redelivered"] == 1
+
+
 def test_every_plan_sample_is_accounted_for(campaign) -> None:
     plan, stamps, u, y = campaign
     asm = _assemble(campaign, drop=10, duplicate=20)
@@ -137,9 +150,14 @@ def test_every_plan_sample_is_accounted_for(campaign) -> None:
         "received": total - 1,
         "missing": 1,
         "duplicated": 0,
+        "redelivered": 0,
         "outside_plan": 0,
     }
     assert accounting["C_l"]["duplicated"] == 1 and accounting["C_l"]["missing"] == 0
+    # The same sample delivered again (same stamp, same value): counted, harmless.
+    asm.add("y", int(stamps[30]), float(y[30]))
+    accounting = asm.sample_accounting(final=True)
+    assert accounting["C_l"]["redelivered"] == 1 and accounting["C_l"]["duplicated"] == 1
     # Before the end, only what both channels have reached is expected.
     partial = CampaignAssembler(plan, T0)
     partial.add_many("u", stamps[:100], u[:100])

@@ -13,6 +13,7 @@ accounted for on both channels (received once, missing, duplicated):
 offline fit from a bag, so both see identical data.
 """
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
@@ -144,6 +145,11 @@ class CampaignAssembler:
         # samples fell outside the plan (before t0 or after its last sample).
         self.coverage = {c: np.zeros(self.total, dtype=np.uint8) for c in ("u", "y")}
         self.outside_plan = {"u": 0, "y": 0}
+        # The value each plan sample arrived with: the same sample delivered again (identical
+        # value) is counted as redelivered and changes nothing; a different value for the same
+        # stamp is a duplicate (a conflict: the period is excluded).
+        self.values = {c: np.full(self.total, np.nan) for c in ("u", "y")}
+        self.redelivered = {"u": 0, "y": 0}
         self._slots: list[_Slot] = []
         for seg in self.plan["segments"]:
             if seg["kind"] == "multisine" and seg.get("period") is not None:
@@ -201,6 +207,11 @@ class CampaignAssembler:
         k = self.index_of(stamp_ns)
         if 0 <= k < self.total:
             coverage = self.coverage[channel]
+            seen = self.values[channel]
+            if coverage[k] and (seen[k] == value or (math.isnan(seen[k]) and math.isnan(value))):
+                self.redelivered[channel] += 1
+                return
+            seen[k] = value
             if coverage[k] < 255:
                 coverage[k] += 1
         else:
@@ -265,8 +276,9 @@ class CampaignAssembler:
         return out
 
     def sample_accounting(self, final: bool = False) -> dict[str, dict[str, int]]:
-        """Per channel: plan samples expected, received exactly once, missing, duplicated, and
-        samples outside the plan. Expected: the whole plan when ``final``; before, the samples
+        """Per channel: plan samples expected, received exactly once, missing, duplicated (with
+        conflicting values), redelivered (identical: harmless, not a problem), and samples
+        outside the plan. Expected: the whole plan when ``final``; before, the samples
         up to the latest that both channels have reached (the rest may still be in flight)."""
         upto = self.total - 1
         if not final:
@@ -281,6 +293,7 @@ class CampaignAssembler:
                 "received": int(np.sum(seen == 1)),
                 "missing": int(np.sum(seen == 0)),
                 "duplicated": int(np.sum(seen > 1)),
+                "redelivered": self.redelivered[channel],
                 "outside_plan": self.outside_plan[channel],
             }
         return out

@@ -570,7 +570,8 @@ def write_report(
     text = ["# Data quality", ""]
     text += [
         f"- {name}: {c['received']} of {c['expected']} plan samples received once, "
-        f"{c['missing']} missing, {c['duplicated']} duplicated, "
+        f"{c['missing']} missing, {c['duplicated']} duplicated with another value, "
+        f"{c.get('redelivered', 0)} delivered twice with the same value (harmless), "
         f"{c['outside_plan']} outside the plan"
         for name, c in samples.items()
     ]
