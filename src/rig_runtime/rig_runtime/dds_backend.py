@@ -284,7 +284,7 @@ class DdsSubscription:
     raw: bool
     profile: QosProfile = PROFILES["default"]
     _matched: _MatchedGids = field(default_factory=_MatchedGids)
-    _recent: dict[str | int, tuple[deque[int], set[int]]] = field(default_factory=dict)
+    _recent: dict[str | int, list[Any]] = field(default_factory=dict)  # [latest, recent times]
     _writer_gid: dict[int, str] = field(default_factory=dict)
     redeliveries: int = 0
 
@@ -316,13 +316,18 @@ class DdsSubscription:
         (two source timestamps) and is not affected: the identification still sees and
         reports such duplicates.
         """
-        writer = self._writer_key(info.publication_handle)
+        writer = self._writer_gid.get(info.publication_handle)
+        if writer is None:
+            writer = self._writer_key(info.publication_handle)
         recent = self._recent.get(writer)
         if recent is None:
-            recent = self._recent[writer] = (deque(), set())
-        order, seen = recent
+            recent = self._recent[writer] = [-1, deque(maxlen=_REDELIVERY_WINDOW)]
         ts = info.source_timestamp
-        if ts in seen:
+        if ts > recent[0]:  # the usual case: later than anything from this writer
+            recent[0] = ts
+            recent[1].append(ts)
+            return False
+        if ts in recent[1]:
             self.redeliveries += 1
             _log.warning(
                 "%s: dropped a sample delivered twice by DDS (same writer and source time; "
@@ -331,10 +336,7 @@ class DdsSubscription:
                 self.redeliveries,
             )
             return True
-        order.append(ts)
-        seen.add(ts)
-        if len(order) > _REDELIVERY_WINDOW:
-            seen.discard(order.popleft())
+        recent[1].append(ts)  # an earlier time, never seen: the writer's clock stepped back
         return False
 
     def publisher_count(self) -> int:
@@ -485,6 +487,13 @@ class DdsBackend:
 
     def now_ns(self) -> int:
         return time.time_ns()
+
+    def match_signature(self) -> tuple[object, ...]:
+        """The matched endpoints' instance handles, per reader and writer: equal as long as
+        nothing was matched or unmatched (the readiness report is rebuilt only otherwise)."""
+        return tuple(tuple(p.matched()) for p in self._publishers) + tuple(
+            tuple(s.matched()) for s in self._subscriptions
+        )
 
     def endpoints(self) -> list[Endpoint]:
         """This node's readers and writers with the GIDs they have matched (start barrier)."""

@@ -84,6 +84,8 @@ class Backend(Protocol):
 
     def endpoints(self) -> list[Endpoint]: ...
 
+    def match_signature(self) -> tuple[object, ...]: ...
+
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]: ...
 
     def close(self) -> None: ...
@@ -152,6 +154,7 @@ class Node:
         self._records: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
         self._ready_pub: Publisher | None = None
         self._last_report = ""
+        self._last_signature: object = None
         self._anomalies: AnomalyLog | None = None
 
     @property
@@ -239,7 +242,9 @@ class Node:
 
     def start_readiness(self, period_s: float = 0.05) -> None:
         """Publish the readiness report now and whenever it changes (run_node calls this
-        once the node is constructed)."""
+        once the node is constructed). Every ``period_s`` only the matched endpoints'
+        handles are compared (cheap); the report is rebuilt when they or the node's own
+        readiness changed."""
         if self._ready_pub is not None:
             return
         # The anomaly writer exists before the node reports ready, so the barrier sees it matched
@@ -251,6 +256,10 @@ class Node:
 
     def _announce(self) -> None:
         assert self._ready_pub is not None
+        signature = (self._ready, self._ready_reason, self._backend.match_signature())
+        if signature == self._last_signature:
+            return
+        self._last_signature = signature
         text = self.readiness_report().to_json()
         if text != self._last_report:
             self._last_report = text

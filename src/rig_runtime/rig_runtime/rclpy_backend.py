@@ -117,6 +117,10 @@ class RclpyBackend:
     def now_ns(self) -> int:
         return int(self.node.get_clock().now().nanoseconds)
 
+    def match_signature(self) -> tuple[object, ...]:
+        """Matched counts per reader and writer (rclpy names no matched endpoints)."""
+        return tuple(e.matched_count for e in self.endpoints())
+
     def endpoints(self) -> list[Endpoint]:
         """Readers and writers with matched counts: rclpy does not name the matched endpoints
         (their GIDs), so the start barrier compares counts (barrier.py)."""
