@@ -225,6 +225,7 @@ def test_fit_of_bag_with_a_damaged_file_warns_and_fits(campaign, tmp_path: Path)
     assert (tmp_path / "fit" / "table1_all_levels.md").exists()
 
 
+@pytest.mark.timeout(900)  # the starved run shares two cores with four busy processes
 def test_starved_campaign_is_lossless_and_gives_the_same_table(campaign, starved_campaign) -> None:
     run, proc = starved_campaign
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -232,6 +233,7 @@ def test_starved_campaign_is_lossless_and_gives_the_same_table(campaign, starved
     _assert_lossless_and_identical(run, campaign[0])
 
 
+@pytest.mark.timeout(900)
 def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
     """SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run: the credit stalls the
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed."""
