@@ -205,3 +205,42 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     finally:
         ident.close()
         node.close()
+
+
+def test_an_anomaly_during_the_final_identification_runs_it_again(
+    campaign, monkeypatch, tmp_path
+) -> None:
+    """The final refit works on a snapshot: an anomaly that arrives while it runs must not be
+    left out of the report the campaign ends with."""
+    from types import SimpleNamespace
+
+    from aero_identification.identifier_node import PARAMETERS, Identifier
+    from rig_runtime.anomaly import Anomaly
+    from rig_runtime.testing import graph_env, join_graph, wait_for
+
+    from rig_runtime import Node
+
+    join_graph(graph_env(), monkeypatch.setenv)
+    args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false"]
+    node = Node("identifier", PARAMETERS, args, backend="dds")
+    ident = Identifier(node)
+    try:
+        plan, stamps = campaign[0], campaign[1]
+        seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 1)
+        ident.assembler = _assemble(campaign)
+        ident._start_refit(True, "plan end")
+        late = Anomaly("lift/invalid/1", "lift", "invalid", int(stamps[seg["start_k"] + 5]), None)
+        ident.on_anomaly(SimpleNamespace(data=late.to_json()))
+        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
+        ident._collect()
+        assert not ident.final_done and ident.pending and ident.pending[-1][1]
+        ident.on_timer()  # starts the final identification again, with the anomaly
+        assert ident.future is not None
+        assert wait_for(lambda: ident.future.done(), 120)
+        ident._collect()
+        assert ident.final_done
+        quality = ident.last_summary["data_quality"]
+        assert not quality["clean"] and any("lift invalid" in a for a in quality["anomalies"])
+    finally:
+        ident.close()
+        node.close()

@@ -81,6 +81,8 @@ class Identifier:
         self.early: list[tuple[str, int, float]] = []
         self.early_dropped = 0
         self.early_anomalies: list[Anomaly] = []
+        self.anomalies_received = 0
+        self.anomalies_at_submit = 0  # anomalies the running refit's data snapshot includes
         self.last_k = {"u": -1, "y": -1}
         # (needed k, final, reason, new multisine data: the models must be refitted)
         self.pending: list[tuple[int, bool, str, bool]] = []
@@ -178,14 +180,8 @@ class Identifier:
 
     def _add_anomaly(self, anomaly: Anomaly) -> None:
         assert self.assembler is not None
-        self.assembler.add_anomaly(
-            anomaly.id,
-            anomaly.first_ns,
-            anomaly.last_ns,
-            f"{anomaly.node} {anomaly.kind}: {anomaly.detail}"
-            if anomaly.detail
-            else f"{anomaly.node} {anomaly.kind}",
-        )
+        self.assembler.add_anomaly(anomaly.id, anomaly.first_ns, anomaly.last_ns, anomaly.label())
+        self.anomalies_received += 1
         self.models_stale = True  # periods may be excluded now: the next refit fits afresh
 
     def _add(self, channel: str, stamp: int, value: float) -> None:
@@ -257,6 +253,7 @@ class Identifier:
         assert self.assembler is not None
         self.refit_started = time.monotonic()
         self.future_reason = reason
+        self.anomalies_at_submit = self.anomalies_received
         # Only sines completed since the last refit: the worker keeps its models and validates
         # them again.
         reuse = not self.models_stale and self.refits > 0
@@ -322,6 +319,16 @@ class Identifier:
         )
         for warning in summary["warnings"]:
             self.node.logger.warning("%s", warning)
+        if summary["complete"] and self.anomalies_received != self.anomalies_at_submit:
+            # An anomaly came in while the final identification ran on the data before it:
+            # run it again, so the report names (and excludes) what the anomaly touches.
+            self.node.logger.warning(
+                "%d anomaly record(s) arrived during the final identification: running it again",
+                self.anomalies_received - self.anomalies_at_submit,
+            )
+            self.pending.append((-1, True, "anomaly during the final identification", True))
+            self.publish_status()
+            return
         if summary["complete"]:
             self.final_done = True
             if summary["written"]:
