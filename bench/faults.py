@@ -115,6 +115,22 @@ def recorder_late(run: Path) -> tuple[int, float, str]:
     return max(codes.values(), key=abs), time.monotonic() - started, ""
 
 
+def after_first_realization(
+    run: Path, node: str, fault: Callable[[Any], None]
+) -> Callable[[subprocess.Popen[str]], None]:
+    """A ``during`` for :func:`campaign`: ``fault(process of node)`` once the identifier has
+    the first realization complete."""
+
+    def inject(proc: subprocess.Popen[str]) -> None:
+        log = run / "logs" / "identifier.log"
+        wait_for(lambda: _log_has(log, "realization 0 complete"), 300)
+        target = node_process(proc.pid, node)
+        if target is not None:
+            fault(target)
+
+    return inject
+
+
 def measure(run: Path, reference: Path | None) -> dict[str, Any]:
     """Samples lost in the bag, what the identification excluded, Table 1 against idle."""
     figures: dict[str, Any] = {}
@@ -199,14 +215,7 @@ def main() -> int:
     if "recorder_late" in cases:
         record("recorder_late", *recorder_late(root / "recorder_late"), reference)
     if "lift_killed" in cases:
-
-        def kill_lift(proc: subprocess.Popen[str]) -> None:
-            log = root / "lift_killed" / "logs" / "identifier.log"
-            wait_for(lambda: _log_has(log, "realization 0 complete"), 300)
-            target = node_process(proc.pid, "lift")
-            if target is not None:
-                target.kill()
-
+        kill_lift = after_first_realization(root / "lift_killed", "lift", lambda p: p.kill())
         record("lift_killed", *campaign(root / "lift_killed", [], kill_lift), reference)
         fit = subprocess.run(
             [
@@ -231,14 +240,9 @@ def main() -> int:
         extra += ["-p", f"generator.barrier_nodes:=[{', '.join(MEMBERS)}]"]
         record("never_ready", *campaign(root / "never_ready", extra), reference)
     if "frozen" in cases:
-
-        def freeze_generator(proc: subprocess.Popen[str]) -> None:
-            log = root / "frozen" / "logs" / "identifier.log"
-            wait_for(lambda: _log_has(log, "realization 0 complete"), 300)
-            target = node_process(proc.pid, "generator")
-            if target is not None:
-                pause(target, 35.0)
-
+        freeze_generator = after_first_realization(
+            root / "frozen", "generator", lambda p: pause(p, 35.0)
+        )
         record("frozen", *campaign(root / "frozen", [], freeze_generator), reference)
     print(f"run directories: {root}")
     print(json.dumps(results))

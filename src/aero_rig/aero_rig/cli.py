@@ -26,10 +26,11 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from aero_identification.quality import data_quality_lines
 from rig_runtime.graph import GraphError, GraphSpec, load_graph, package_share
 from rig_runtime.launcher import Launcher, parse_overrides
 
-from .verdict import data_quality_lines, run_problems
+from .verdict import run_problems
 
 EXIT_NOT_CLEAN = 3  # the campaign finished but lost or excluded data
 VIEW_MODES = ("spawn", "save", "serve", "off")  # "off": no view node (the node calls it "none")

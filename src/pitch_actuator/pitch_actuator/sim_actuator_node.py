@@ -19,6 +19,7 @@ refused, rate limited, held) and every jump of the command stamps (``time_discon
 identification excludes the periods they touch.
 """
 
+import json
 import math
 import sys
 import time
@@ -136,7 +137,7 @@ class SimActuator:
         self._step_and_publish(setpoint, stamp_ns)
 
     def on_segment(self, msg: Any) -> None:
-        if '"plan_end"' in msg.data:
+        if json.loads(msg.data).get("event") == "plan_end":
             self.plan_ended = True
 
     def on_stop(self, msg: Any) -> None:

@@ -205,20 +205,21 @@ class _MatchedGids:
     def __init__(self) -> None:
         self.by_handle: dict[int, str] = {}
 
+    def gid(self, handle: int, lookup: Callable[[int], Any]) -> str | None:
+        """The GID behind a handle (None if it was unmatched in between)."""
+        gid = self.by_handle.get(handle)
+        if gid is None:
+            try:
+                data = lookup(handle)
+            except DDSException:
+                data = None
+            if data is None:
+                return None
+            gid = self.by_handle[handle] = str(data.key)
+        return gid
+
     def gids(self, handles: list[int], lookup: Callable[[int], Any]) -> tuple[str, ...]:
-        out = []
-        for h in handles:
-            gid = self.by_handle.get(h)
-            if gid is None:
-                try:
-                    data = lookup(h)
-                except DDSException:
-                    data = None
-                if data is None:
-                    continue  # unmatched in between
-                gid = self.by_handle[h] = str(data.key)
-            out.append(gid)
-        return tuple(sorted(out))
+        return tuple(sorted(g for h in handles if (g := self.gid(h, lookup)) is not None))
 
 
 def _endpoint(
@@ -285,25 +286,10 @@ class DdsSubscription:
     profile: QosProfile = PROFILES["default"]
     _matched: _MatchedGids = field(default_factory=_MatchedGids)
     _recent: dict[str | int, list[Any]] = field(default_factory=dict)  # [latest, recent times]
-    _writer_gid: dict[int, str] = field(default_factory=dict)
     redeliveries: int = 0
 
     def matched(self) -> list[int]:
         return _matched_handles(self.reader, self.reader._get_matched_publications)
-
-    def _writer_key(self, handle: int) -> str | int:
-        """The matched writer's GUID (stable if DDS rediscovers the writer under a new handle);
-        the handle itself when the writer is no longer matched."""
-        key = self._writer_gid.get(handle)
-        if key is None:
-            try:
-                data = self.reader.get_matched_publication_data(handle)
-            except DDSException:
-                data = None
-            if data is None:
-                return handle
-            key = self._writer_gid[handle] = str(data.key)
-        return key
 
     def _redelivered(self, info: Any) -> bool:
         """Whether this sample was delivered before: same writer, same source timestamp.
@@ -316,9 +302,10 @@ class DdsSubscription:
         (two source timestamps) and is not affected: the identification still sees and
         reports such duplicates.
         """
-        writer = self._writer_gid.get(info.publication_handle)
-        if writer is None:
-            writer = self._writer_key(info.publication_handle)
+        # The writer's GUID: stable if DDS rediscovers it under a new handle (the handle itself
+        # once it is no longer matched).
+        handle = info.publication_handle
+        writer = self._matched.gid(handle, self.reader.get_matched_publication_data) or handle
         recent = self._recent.get(writer)
         if recent is None:
             recent = self._recent[writer] = [-1, deque(maxlen=_REDELIVERY_WINDOW)]

@@ -11,7 +11,7 @@ from pathlib import Path
 import psutil
 import yaml
 from rig_runtime.graph import load_graph
-from rig_runtime.testing import descendants, graph_env, process_gone, wait_for
+from rig_runtime.testing import descendants, finish, graph_env, process_gone, wait_for
 
 
 def _graph(tmp_path: Path, talker_exit: int, listener_result: Path) -> Path:
@@ -72,11 +72,7 @@ def test_a_node_failing_at_start_is_named_with_its_own_error_line(tmp_path: Path
     result = tmp_path / "listener.json"
     graph = _graph(tmp_path, 0, result)
     proc = _launch(graph, "-p", "talker.count:=-5")
-    try:
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+    _, err = finish(proc, 60)
     assert proc.returncode != 0
     last = [line for line in err.splitlines() if line.startswith("[rig-launch] error")][-1]
     assert "node 'talker' exited with code 2: [FATAL] [talker]: parameter 'count'" in last, err
