@@ -6,10 +6,10 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := rig_runtime multisine_gen pitch_actuator pressure_scanner aero_identification aero_rig
+PACKAGES := rig_runtime multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
 PKG_FILES := $(foreach p,$(PACKAGES),src/$(p)/setup.py src/$(p)/package.xml)
 
-.PHONY: test campaign lint format bench venv clean
+.PHONY: test test-fast campaign lint format typecheck bench venv clean
 
 venv: $(STAMP)
 
@@ -36,8 +36,16 @@ format: $(STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
-test: lint
+typecheck: $(STAMP)
+	$(BIN)/mypy
+
+# The full suite: lint, types, every test (graph tests and campaigns included).
+test: lint typecheck
 	$(BIN)/pytest
+
+# Unit tests only (no node graph, no campaign, no build): under a minute.
+test-fast: $(STAMP)
+	$(BIN)/pytest -m "not slow"
 
 campaign: $(STAMP)
 	$(BIN)/aero-rig campaign --plan default $(CAMPAIGN_ARGS)

@@ -12,10 +12,10 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from aero_identification.data import random_phase_period
 from scipy.signal import freqz, lfilter
 
 from aero_identification import BLA, PeriodicData, estimate_bla, transient_periods
+from aero_identification.data import random_phase_period
 
 N, P, M = 8192, 8, 10
 FS = 200.0

@@ -33,7 +33,16 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from rosbags.highlevel import AnyReader
+
 from rig_runtime.graph import load_graph, package_share
+from rig_runtime.interface import (
+    EXPERIMENT_PLAN,
+    PITCH_COMMAND,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    WING_COEFFICIENTS,
+)
 from rig_runtime.launcher import Launcher, node_command
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.testing import (
@@ -45,10 +54,9 @@ from rig_runtime.testing import (
     start_session,
     wait_for,
 )
-from rosbags.highlevel import AnyReader
 
 SIM = package_share("aero_rig") / "config" / "sim.yaml"
-STREAM = ("/pitch/command", "/pitch/state", "/pressure/taps", "/wing/coefficients")
+STREAM = (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name)
 MEMBERS = ["sim_actuator", "sim_wing", "lift", "identifier", "recorder"]
 
 
@@ -138,10 +146,10 @@ def measure(run: Path, reference: Path | None) -> dict[str, Any]:
     plan: dict[str, Any] | None = None
     try:
         with AnyReader([run / "bag"]) as reader:
-            conns = [c for c in reader.connections if c.topic in (*STREAM, "/experiment/plan")]
+            conns = [c for c in reader.connections if c.topic in (*STREAM, EXPERIMENT_PLAN.name)]
             for conn, _, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
-                if conn.topic == "/experiment/plan":
+                if conn.topic == EXPERIMENT_PLAN.name:
                     plan = json.loads(msg.data)
                 else:
                     stamps[conn.topic].add(stamp_to_ns(msg.header.stamp))

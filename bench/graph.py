@@ -26,12 +26,14 @@ from typing import Any
 
 import numpy as np
 import psutil
+from rosbags.highlevel import AnyReader
+
 from aero_rig.cli import CampaignMonitor, _config
 from rig_runtime.graph import load_graph
+from rig_runtime.interface import PITCH_COMMAND, WING_COEFFICIENTS
 from rig_runtime.launcher import Launcher
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.testing import graph_env, join_graph, unique_domain_id
-from rosbags.highlevel import AnyReader
 
 
 def _sample_processes(
@@ -87,7 +89,7 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
         launcher.stop()
     wall = time.monotonic() - t0
     with AnyReader([run_dir / "bag"]) as reader:
-        stamps: dict[str, set[int]] = {"/pitch/command": set(), "/wing/coefficients": set()}
+        stamps: dict[str, set[int]] = {PITCH_COMMAND.name: set(), WING_COEFFICIENTS.name: set()}
         conns = [c for c in reader.connections if c.topic in stamps]
         for conn, _, raw in reader.messages(connections=conns):
             stamps[conn.topic].add(stamp_to_ns(reader.deserialize(raw, conn.msgtype).header.stamp))
@@ -106,8 +108,8 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
         "wall_s": round(wall, 2),
         "experiment_s": experiment_s,
         "real_time_factor": round(experiment_s / wall, 2),
-        "samples": len(stamps["/pitch/command"]),
-        "samples_lost": len(stamps["/pitch/command"] - stamps["/wing/coefficients"]),
+        "samples": len(stamps[PITCH_COMMAND.name]),
+        "samples_lost": len(stamps[PITCH_COMMAND.name] - stamps[WING_COEFFICIENTS.name]),
         "refit_s": status_refits,
         "max_refit_s": max(status_refits) if status_refits else None,
         "node_cpu_s": {k: round(v, 1) for k, v in cpu.items()},
@@ -148,9 +150,9 @@ def latency(seconds: float, run_dir: Path) -> dict[str, Any]:
 
     warmup = 400  # the first 2 s: processes still loading (numba cache, first messages)
 
-    node.create_subscription("sensor_msgs/msg/JointState", "/pitch/command", on_command, "stream")
+    node.create_subscription(PITCH_COMMAND.type, PITCH_COMMAND.name, on_command, PITCH_COMMAND.qos)
     node.create_subscription(
-        "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", on_coefficients, "stream"
+        WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, on_coefficients, WING_COEFFICIENTS.qos
     )
     launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "latency_logs")
     launcher.start()

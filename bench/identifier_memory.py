@@ -21,12 +21,12 @@ import time
 from typing import Any
 
 import numpy as np
-from aero_identification.campaign import CampaignAssembler
-from aero_rig.simulation import simulate_plan
-from multisine_gen.plan import default_plan, short_plan
 
 from aero_identification import refit_worker
+from aero_identification.campaign import CampaignAssembler
 from aero_identification.config import IdentificationConfig
+from aero_rig.simulation import simulate_plan
+from multisine_gen.campaigns import default_plan, short_plan
 
 
 def refit_points(assembler: CampaignAssembler, plan: dict[str, Any]) -> list[tuple[int, bool, str]]:

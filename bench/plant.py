@@ -18,9 +18,10 @@ import math  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-from pressure_scanner.aero import UnsteadyAerodynamics  # noqa: E402
+
 from pressure_scanner.integration import PressureIntegrator  # noqa: E402
-from pressure_scanner.plant import WingPlant  # noqa: E402
+from wing_sim.aero import UnsteadyAerodynamics  # noqa: E402
+from wing_sim.plant import WingPlant  # noqa: E402
 
 
 def multisine_deg(n: int, offset_deg: float, seed: int = 0) -> np.ndarray:

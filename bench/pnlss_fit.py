@@ -76,7 +76,8 @@ def main() -> None:
     from aero_identification.bla import estimate_bla
     from aero_identification.data import PeriodicData
     from aero_identification.metrics import relative_rms_error
-    from aero_identification.pnlss import STATE_BOUND, _Layout, fit_pnlss
+    from aero_identification.models import STATE_BOUND
+    from aero_identification.pnlss import _Layout, fit_pnlss
     from aero_identification.pnlss_kernels import jacobian_records, simulate_records
     from aero_identification.subspace import fit_linear_ss
 

@@ -18,6 +18,7 @@ import sys
 import time
 
 import numpy as np
+
 from rig_runtime.demo_nodes import make_message
 from rig_runtime.node import Node
 from rig_runtime.testing import graph_env, join_graph, unique_domain_id

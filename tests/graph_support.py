@@ -4,6 +4,8 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
+
+from rig_runtime.interface import DIAGNOSTICS
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import Node
 
@@ -55,7 +57,7 @@ def subscribe_diagnostics(
                 values = {kv.key: kv.value for kv in status.values}
                 entries.append((status.hardware_id, values) if hardware_id else values)
 
-    return node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", on_array)
+    return node.create_subscription(DIAGNOSTICS.type, DIAGNOSTICS.name, on_array)
 
 
 def wait_diagnostics(

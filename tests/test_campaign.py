@@ -12,7 +12,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from aero_rig.launch_description import DESIGN_TOPICS
+from rosbags.highlevel import AnyReader
+
+from rig_runtime.interface import (
+    EXPERIMENT_PLAN,
+    PITCH_COMMAND,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    RECORDED_TOPICS,
+    WING_COEFFICIENTS,
+)
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.testing import (
     BusyProcesses,
@@ -25,7 +34,6 @@ from rig_runtime.testing import (
     start_session,
     wait_for,
 )
-from rosbags.highlevel import AnyReader
 
 CLI = (sys.executable, "-m", "aero_rig.cli")
 RTF5 = ("--real-time-factor", "5")
@@ -63,7 +71,7 @@ def campaign(
     return run, proc
 
 
-STREAM_TOPICS = ("/pitch/command", "/pitch/state", "/pressure/taps", "/wing/coefficients")
+STREAM_TOPICS = (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name)
 # What a run that lost its stream logs (the first wave's failure under load: the actuator ran on
 # in real time and its time went backwards); every anomaly is logged as "anomaly: ...".
 CORRUPTION_SIGNS = ("running on in real time", "time went backwards", "anomaly:")
@@ -99,8 +107,8 @@ def _assert_lossless_and_identical(run: Path, reference: Path) -> None:
     models = json.loads((run / "models.json").read_text())
     assert models["data_quality"]["clean"], models["data_quality"]
     stamps = _stream_stamps(run / "bag")
-    commands = set(stamps["/pitch/command"])
-    assert len(commands) == len(stamps["/pitch/command"]) > 0
+    commands = set(stamps[PITCH_COMMAND.name])
+    assert len(commands) == len(stamps[PITCH_COMMAND.name]) > 0
     for topic in STREAM_TOPICS:
         missing = commands - set(stamps[topic])
         assert not missing, f"{topic}: {len(missing)} plan samples missing from the bag"
@@ -141,23 +149,24 @@ def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
     stamps: dict[str, list[int]] = {}
     with AnyReader([run / "bag"]) as reader:
         topics = {c.topic for c in reader.connections}
-        assert set(DESIGN_TOPICS) <= topics
+        assert {t.name for t in RECORDED_TOPICS} <= topics
         conns = [
             c
             for c in reader.connections
-            if c.topic in ("/pitch/command", "/pitch/state", "/pressure/taps", "/wing/coefficients")
+            if c.topic
+            in (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name)
         ]
         for conn, _, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, conn.msgtype)
             stamps.setdefault(conn.topic, []).append(stamp_to_ns(msg.header.stamp))
-        plan_conn = [c for c in reader.connections if c.topic == "/experiment/plan"]
+        plan_conn = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
         plan = json.loads(
             reader.deserialize(next(reader.messages(plan_conn))[2], "std_msgs/msg/String").data
         )
-    commands = np.array(stamps["/pitch/command"])
+    commands = np.array(stamps[PITCH_COMMAND.name])
     assert len(commands) == plan["total_samples"]
     assert len(np.unique(commands)) == len(commands)
-    coefficients = set(stamps["/wing/coefficients"])
+    coefficients = set(stamps[WING_COEFFICIENTS.name])
     missing = [s for s in commands if s not in coefficients]
     assert not missing, f"{len(missing)} command samples have no coefficients sample"
 
@@ -265,12 +274,12 @@ def test_fit_of_bag_without_needed_topics_names_them(tmp_path: Path) -> None:
 
     bag = tmp_path / "partial"
     writer = SplitBagWriter(bag)
-    conn = writer.add_connection("/pitch/state", "sensor_msgs/msg/JointState")
+    conn = writer.add_connection(PITCH_STATE.name, "sensor_msgs/msg/JointState")
     writer.write(conn, 1, serialize(new_message("sensor_msgs/msg/JointState", position=[0.1])))
     writer.close()
     proc = _aero_rig("fit", str(bag), env=graph_env(), timeout=120)
     assert proc.returncode == 2
-    assert "/experiment/plan" in proc.stderr and "/wing/coefficients" in proc.stderr
+    assert EXPERIMENT_PLAN.name in proc.stderr and WING_COEFFICIENTS.name in proc.stderr
 
 
 def test_killing_the_identifier_stops_the_campaign_with_a_clear_error(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ PACKAGES = [
     "multisine_gen",
     "pitch_actuator",
     "pressure_scanner",
+    "wing_sim",
     "aero_identification",
     "aero_rig",
 ]

@@ -15,8 +15,19 @@ from pathlib import Path
 
 import pytest
 import yaml
-from multisine_gen.plan import build_plan
+from rosbags.highlevel import AnyReader
+
+from multisine_gen.campaigns import build_plan
+from rig_runtime import Node
 from rig_runtime.graph import load_graph, package_share
+from rig_runtime.interface import (
+    EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
+    PITCH_COMMAND,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    WING_COEFFICIENTS,
+)
 from rig_runtime.launcher import Launcher, node_command
 from rig_runtime.testing import (
     finish,
@@ -27,9 +38,6 @@ from rig_runtime.testing import (
     start_session,
     wait_for,
 )
-from rosbags.highlevel import AnyReader
-
-from rig_runtime import Node
 
 SIM_GRAPH = package_share("aero_rig") / "config" / "sim.yaml"
 
@@ -100,8 +108,8 @@ def test_a_node_that_never_becomes_ready_stops_the_start_and_nothing_moves(
     assert "node 'generator' exited with code 1: [ERROR]" in err, err
     assert "start barrier: not ready after 4 s" in err and "/identifier: no readiness" in err
     counts = _topic_counts(run / "bag")
-    assert counts.get("/pitch/command", 0) == 0 and counts.get("/pitch/state", 0) == 0
-    assert "/experiment/plan" not in counts or counts["/experiment/plan"] == 0
+    assert counts.get(PITCH_COMMAND.name, 0) == 0 and counts.get(PITCH_STATE.name, 0) == 0
+    assert EXPERIMENT_PLAN.name not in counts or counts[EXPERIMENT_PLAN.name] == 0
 
 
 def test_a_recorder_started_late_is_waited_for_and_records_everything(
@@ -149,9 +157,9 @@ def test_a_recorder_started_late_is_waited_for_and_records_everything(
     plan = json.loads(small_plan.read_text())
     counts = _topic_counts(run / "bag")
     total = sum(s["length"] for s in plan["segments"])
-    for topic in ("/pitch/command", "/pitch/state", "/pressure/taps", "/wing/coefficients"):
+    for topic in (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name):
         assert counts.get(topic, 0) >= total, (topic, counts.get(topic), total)
-    assert counts["/pitch/command"] == total
+    assert counts[PITCH_COMMAND.name] == total
     assert json.loads((run / "models.json").read_text())["data_quality"]["clean"]
 
 
@@ -209,8 +217,8 @@ def test_a_free_running_actuator_is_reported_excluded_and_fails_the_campaign(
     watcher = Node("fault_watcher", argv=[], backend="dds")
     events: list[dict[str, object]] = []
     watcher.create_subscription(
-        "std_msgs/msg/String",
-        "/experiment/segment",
+        EXPERIMENT_SEGMENT.type,
+        EXPERIMENT_SEGMENT.name,
         lambda m: events.append(json.loads(m.data)),
         "events",
     )

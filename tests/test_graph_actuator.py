@@ -5,15 +5,17 @@ from pathlib import Path
 
 import numpy as np
 from graph_support import Observer
-from multisine_gen.plan import short_plan
+
+from multisine_gen.campaigns import short_plan
 from pitch_actuator.dynamics import ActuatorModel
+from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, PITCH_COMMAND, PITCH_STATE
 from rig_runtime.testing import Processes, graph_env, join_graph
 
 TOPICS = {
-    "/pitch/command": ("sensor_msgs/msg/JointState", "stream"),
-    "/pitch/state": ("sensor_msgs/msg/JointState", "stream"),
-    "/experiment/segment": ("std_msgs/msg/String", "events"),
-    "/experiment/plan": ("std_msgs/msg/String", "latched"),
+    PITCH_COMMAND.name: ("sensor_msgs/msg/JointState", "stream"),
+    PITCH_STATE.name: ("sensor_msgs/msg/JointState", "stream"),
+    EXPERIMENT_SEGMENT.name: ("std_msgs/msg/String", "events"),
+    EXPERIMENT_PLAN.name: ("std_msgs/msg/String", "latched"),
 }
 
 
@@ -43,10 +45,10 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
             total = plan.total_samples
             done = observer.spin_until(
                 lambda: (
-                    len(observer.data["/pitch/state"]) >= total
+                    len(observer.data[PITCH_STATE.name]) >= total
                     and any(
                         json.loads(m.data).get("event") == "plan_end"
-                        for _, m in observer.data["/experiment/segment"]
+                        for _, m in observer.data[EXPERIMENT_SEGMENT.name]
                     )
                 ),
                 120,
@@ -56,21 +58,21 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
     finally:
         observer.close()
 
-    commands = observer.stamps("/pitch/command")
-    states = observer.stamps("/pitch/state")[:total]
+    commands = observer.stamps(PITCH_COMMAND.name)
+    states = observer.stamps(PITCH_STATE.name)[:total]
     assert len(commands) == total
     # One state per command, same stamp, in order, none lost or duplicated.
     np.testing.assert_array_equal(commands, states)
     assert np.all(np.diff(commands) == 5_000_000)
 
     # The plan on the wire rebuilds the commands exactly.
-    plan_json = json.loads(observer.data["/experiment/plan"][0][1].data)
+    plan_json = json.loads(observer.data[EXPERIMENT_PLAN.name][0][1].data)
     assert plan_json["total_samples"] == total
-    cmd = np.array([m.position[0] for _, m in observer.data["/pitch/command"]])
+    cmd = np.array([m.position[0] for _, m in observer.data[PITCH_COMMAND.name]])
     np.testing.assert_allclose(np.degrees(cmd), plan.command_deg(), atol=1e-9)
 
     # Measured pitch follows the command with the loop's gain and phase at excited lines.
-    pos = np.array([m.position[0] for _, m in observer.data["/pitch/state"][:total]])
+    pos = np.array([m.position[0] for _, m in observer.data[PITCH_STATE.name][:total]])
     seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 1)
     N = seg.samples_per_period
     lines = plan.levels[0].realizations[0].excited_lines[:6]
@@ -81,6 +83,6 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
     np.testing.assert_allclose(np.abs(Y / U), np.abs(expected), rtol=0.01)
     np.testing.assert_allclose(np.angle(Y / U / expected), 0.0, atol=0.01)
 
-    events = [json.loads(m.data) for _, m in observer.data["/experiment/segment"]]
+    events = [json.loads(m.data) for _, m in observer.data[EXPERIMENT_SEGMENT.name]]
     starts = [e for e in events if e.get("event") == "start"]
     assert len(starts) == len(plan.segments)

@@ -1,4 +1,4 @@
-"""Safety of the simulated actuator node seen through DDS (DESIGN.md §8).
+"""Safety of the simulated actuator node seen through DDS (docs/design.md §8).
 
 The test process commands ``sim_actuator`` (a separate process) on ``/pitch/command`` and reads
 ``/pitch/state`` and ``/diagnostics``: out-of-range commands are clamped to the limits, NaN/inf
@@ -15,6 +15,15 @@ from typing import Any
 import numpy as np
 import pytest
 from graph_support import subscribe_diagnostics, wait_diagnostics
+
+from rig_runtime.interface import (
+    ALPHA_TRUE_JOINT,
+    PITCH_COMMAND,
+    PITCH_JOINT,
+    PITCH_STATE,
+    PITCH_STOP,
+    joint_position,
+)
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph
@@ -39,14 +48,14 @@ class ActuatorClient:
     def __init__(self) -> None:
         self.node = Node("safety_test", argv=[], backend="dds")
         self.cmd = self.node.create_publisher(
-            "sensor_msgs/msg/JointState", "/pitch/command", "stream"
+            PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )
-        self.stop_pub = self.node.create_publisher("std_msgs/msg/Bool", "/pitch/stop")
+        self.stop_pub = self.node.create_publisher(PITCH_STOP.type, PITCH_STOP.name)
         self.states: list[tuple[int, float, float]] = []  # stamp, pitch [deg], alpha_true [deg]
         self.diagnostics: list[dict[str, str]] = []
         self.subs = [
             self.node.create_subscription(
-                "sensor_msgs/msg/JointState", "/pitch/state", self._on_state, "stream"
+                PITCH_STATE.type, PITCH_STATE.name, self._on_state, PITCH_STATE.qos
             ),
             subscribe_diagnostics(self.node, "pitch actuator safety", self.diagnostics),
         ]
@@ -54,9 +63,10 @@ class ActuatorClient:
         self.next_k = 0
 
     def _on_state(self, msg: Any) -> None:
-        names = list(msg.name)
-        pitch = math.degrees(msg.position[names.index("pitch")])
-        alpha = math.degrees(msg.position[names.index("alpha_true")])
+        pitch_rad = joint_position(msg, PITCH_JOINT)
+        alpha_rad = joint_position(msg, ALPHA_TRUE_JOINT)
+        assert pitch_rad is not None and alpha_rad is not None, msg
+        pitch, alpha = math.degrees(pitch_rad), math.degrees(alpha_rad)
         self.states.append((stamp_to_ns(msg.header.stamp), pitch, alpha))
 
     def wait_ready(self, timeout_s: float = 30.0) -> bool:
@@ -86,7 +96,7 @@ class ActuatorClient:
             ):
                 self.node.spin_once(0.01)
             msg = self.node.new_message(
-                "sensor_msgs/msg/JointState", name=["pitch"], position=[math.radians(value)]
+                "sensor_msgs/msg/JointState", name=[PITCH_JOINT], position=[math.radians(value)]
             )
             set_stamp(msg.header.stamp, self.stamp(self.next_k))
             self.cmd.publish(msg)

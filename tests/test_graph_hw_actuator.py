@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 import pytest
 from graph_support import subscribe_diagnostics, wait_diagnostics
+
+from rig_runtime.interface import PITCH_COMMAND, PITCH_JOINT, PITCH_STATE, joint_position
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
@@ -34,14 +36,14 @@ class HwClient:
     def __init__(self) -> None:
         self.node = Node("hw_test", argv=[], backend="dds")
         self.cmd = self.node.create_publisher(
-            "sensor_msgs/msg/JointState", "/pitch/command", "stream"
+            PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )
         self.states: list[tuple[int, float]] = []  # controller stamp [ns], pitch [deg]
         self.diagnostics: list[tuple[str, dict[str, str]]] = []  # hardware_id, values
         self.sent: list[tuple[int, float]] = []  # wall ns, command [rad]
         self.subs = [
             self.node.create_subscription(
-                "sensor_msgs/msg/JointState", "/pitch/state", self._on_state, "stream"
+                PITCH_STATE.type, PITCH_STATE.name, self._on_state, PITCH_STATE.qos
             ),
             subscribe_diagnostics(
                 self.node, "pitch actuator safety", self.diagnostics, hardware_id=True
@@ -49,7 +51,9 @@ class HwClient:
         ]
 
     def _on_state(self, msg: Any) -> None:
-        pitch = math.degrees(msg.position[list(msg.name).index("pitch")])
+        pitch_rad = joint_position(msg, PITCH_JOINT)
+        assert pitch_rad is not None, msg
+        pitch = math.degrees(pitch_rad)
         self.states.append((stamp_to_ns(msg.header.stamp), pitch))
 
     def wait_ready(self, timeout_s: float = 30.0) -> bool:
@@ -65,7 +69,7 @@ class HwClient:
 
     def command(self, value_rad: float) -> None:
         msg = self.node.new_message(
-            "sensor_msgs/msg/JointState", name=["pitch"], position=[value_rad]
+            "sensor_msgs/msg/JointState", name=[PITCH_JOINT], position=[value_rad]
         )
         now = time.time_ns()
         set_stamp(msg.header.stamp, now)

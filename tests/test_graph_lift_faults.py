@@ -13,14 +13,16 @@ from typing import Any
 import numpy as np
 import pytest
 from graph_support import subscribe_diagnostics, wait_diagnostics
+
 from pressure_scanner.integration import PressureIntegrator
-from pressure_scanner.plant import WingPlant
 from pressure_scanner.tap_cloud import fill_cloud
 from pressure_scanner.taps import load_taps
-from pressure_scanner.wing_params import WingParams
+from rig_runtime.interface import PITCH_JOINT, PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph
+from wing_sim.plant import WingPlant
+from wing_sim.wing_params import WingParams
 
 PERIOD_NS = 5_000_000
 ALPHA_DEG = 8.0
@@ -30,16 +32,16 @@ class LiftClient:
     def __init__(self) -> None:
         self.node = Node("lift_test", argv=[], backend="dds")
         self.state_pub = self.node.create_publisher(
-            "sensor_msgs/msg/JointState", "/pitch/state", "stream"
+            PITCH_STATE.type, PITCH_STATE.name, PITCH_STATE.qos
         )
         self.taps_pub = self.node.create_publisher(
-            "sensor_msgs/msg/PointCloud2", "/pressure/taps", "stream"
+            PRESSURE_TAPS.type, PRESSURE_TAPS.name, PRESSURE_TAPS.qos
         )
         self.out: list[tuple[int, np.ndarray]] = []
         self.diagnostics: list[dict[str, str]] = []
         self.subs = [
             self.node.create_subscription(
-                "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", self._on_out, "stream"
+                WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, self._on_out, WING_COEFFICIENTS.qos
             ),
             subscribe_diagnostics(self.node, "pressure integration", self.diagnostics),
         ]
@@ -67,7 +69,7 @@ class LiftClient:
 
     def publish_state(self, k: int, alpha_rad: float) -> None:
         msg = self.node.new_message(
-            "sensor_msgs/msg/JointState", name=["pitch"], position=[alpha_rad], velocity=[0.0]
+            "sensor_msgs/msg/JointState", name=[PITCH_JOINT], position=[alpha_rad], velocity=[0.0]
         )
         set_stamp(msg.header.stamp, self.stamp(k))
         self.state_pub.publish(msg)

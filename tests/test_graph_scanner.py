@@ -1,6 +1,6 @@
 """Scanner driver node against the simulated scanner (PWSC frames over UDP loopback).
 
-``python -m pressure_scanner.sim_scanner`` streams the WingPlant's pressures (plus fixed zero
+``python -m wing_sim.sim_scanner`` streams the WingPlant's pressures (plus fixed zero
 offsets, after wind-off frames) with deliberate faults; the ``scanner`` node publishes them on
 ``/pressure/taps``. The test process requests a zero on ``/pressure/tare`` during the wind-off
 frames and checks the pressures against the plant run here with the same seed and α.
@@ -15,12 +15,14 @@ from typing import Any
 import numpy as np
 import pytest
 from graph_support import subscribe_diagnostics
-from pressure_scanner.plant import WingPlant
-from pressure_scanner.sim_scanner import alpha_rad, zero_offsets_pa
+
 from pressure_scanner.tap_cloud import read_cloud
+from rig_runtime.interface import PRESSURE_TAPS, PRESSURE_TARE
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
+from wing_sim.plant import WingPlant
+from wing_sim.sim_scanner import alpha_rad, zero_offsets_pa
 
 RATE_HZ = 200.0
 PERIOD_NS = 5_000_000
@@ -41,12 +43,12 @@ NOISE_PA = 0.5  # wind-off reading noise (sim_scanner default)
 class ScannerClient:
     def __init__(self) -> None:
         self.node = Node("scanner_test", argv=[], backend="dds")
-        self.tare = self.node.create_publisher("std_msgs/msg/Bool", "/pressure/tare")
+        self.tare = self.node.create_publisher(PRESSURE_TARE.type, PRESSURE_TARE.name)
         self.frames: list[tuple[int, np.ndarray]] = []
         self.diagnostics: list[dict[str, str]] = []
         self.subs = [
             self.node.create_subscription(
-                "sensor_msgs/msg/PointCloud2", "/pressure/taps", self._on_taps, "stream"
+                PRESSURE_TAPS.type, PRESSURE_TAPS.name, self._on_taps, PRESSURE_TAPS.qos
             ),
             subscribe_diagnostics(self.node, "pressure scanner", self.diagnostics),
         ]
@@ -89,7 +91,7 @@ def test_scanner_node_publishes_plant_pressures_counts_faults_and_tares(
             assert ready, "scanner node not discovered"
             t_start_ns = time.time_ns()
             sim = procs.start_python(
-                "-m pressure_scanner.sim_scanner",
+                "-m wing_sim.sim_scanner",
                 *("--port", str(port), "--rate", str(RATE_HZ), "--frames", str(FRAMES)),
                 *("--alpha-deg", str(ALPHA_DEG), "--alpha-amp-deg", str(AMP_DEG)),
                 *("--alpha-freq-hz", str(FREQ_HZ), "--seed", str(SEED)),

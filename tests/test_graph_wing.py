@@ -5,13 +5,15 @@ from pathlib import Path
 
 import numpy as np
 from graph_support import Observer
-from multisine_gen.plan import short_plan
+
+from multisine_gen.campaigns import short_plan
+from rig_runtime.interface import PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
 from rig_runtime.testing import Processes, graph_env, join_graph
 
 TOPICS = {
-    "/pitch/state": ("sensor_msgs/msg/JointState", "stream"),
-    "/pressure/taps": ("sensor_msgs/msg/PointCloud2", "stream"),
-    "/wing/coefficients": ("geometry_msgs/msg/Vector3Stamped", "stream"),
+    PITCH_STATE.name: ("sensor_msgs/msg/JointState", "stream"),
+    PRESSURE_TAPS.name: ("sensor_msgs/msg/PointCloud2", "stream"),
+    WING_COEFFICIENTS.name: ("geometry_msgs/msg/Vector3Stamped", "stream"),
 }
 
 
@@ -23,7 +25,7 @@ def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -
     try:
         with Processes(env, log_dir=tmp_path) as procs:
             procs.start_entry("pitch_actuator", "sim_actuator", name="sim_actuator")
-            procs.start_entry("pressure_scanner", "sim_wing", name="sim_wing")
+            procs.start_entry("wing_sim", "sim_wing", name="sim_wing")
             procs.start_entry("pressure_scanner", "lift", name="lift")
             assert observer.wait_matched(30), "nodes did not come up"
             t0 = time.monotonic()
@@ -42,20 +44,20 @@ def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -
                 name="generator",
             )
             done = observer.spin_until(
-                lambda: len(observer.data["/wing/coefficients"]) >= total, 180
+                lambda: len(observer.data[WING_COEFFICIENTS.name]) >= total, 180
             )
             wall = time.monotonic() - t0
             logs = "".join(procs.log(n) for n in ("generator", "sim_actuator", "sim_wing", "lift"))
             assert done, logs
     finally:
         observer.close()
-    states = observer.stamps("/pitch/state")[:total]
-    taps = observer.stamps("/pressure/taps")[:total]
-    coeffs = observer.stamps("/wing/coefficients")[:total]
+    states = observer.stamps(PITCH_STATE.name)[:total]
+    taps = observer.stamps(PRESSURE_TAPS.name)[:total]
+    coeffs = observer.stamps(WING_COEFFICIENTS.name)[:total]
     np.testing.assert_array_equal(states, taps)
     np.testing.assert_array_equal(states, coeffs)
     assert len(np.unique(coeffs)) == total
-    cl = np.array([m.vector.x for _, m in observer.data["/wing/coefficients"][:total]])
+    cl = np.array([m.vector.x for _, m in observer.data[WING_COEFFICIENTS.name][:total]])
     assert np.all(np.isfinite(cl))
     assert 0.2 < np.median(cl) < 2.0  # lift of a wing between 0° and 25°
     print(f"chain: {total} samples in {wall:.1f} s = {total / 200 / wall:.1f}x real time")

@@ -4,11 +4,12 @@ import json
 
 import numpy as np
 import pytest
+
 from aero_identification.campaign import CampaignAssembler
 from aero_identification.pipeline import IdentificationConfig, identify
 from aero_rig.simulation import T0_NS as T0
 from aero_rig.simulation import simulate_plan
-from multisine_gen.plan import short_plan
+from multisine_gen.campaigns import short_plan
 
 
 @pytest.fixture(scope="module")
@@ -175,9 +176,8 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     import signal
 
     from aero_identification.identifier_node import PARAMETERS, Identifier
-    from rig_runtime.testing import graph_env, join_graph, wait_for
-
     from rig_runtime import Node
+    from rig_runtime.testing import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
     node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3"], backend="dds")
@@ -215,10 +215,9 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
     from types import SimpleNamespace
 
     from aero_identification.identifier_node import PARAMETERS, Identifier
+    from rig_runtime import Node
     from rig_runtime.anomaly import Anomaly
     from rig_runtime.testing import graph_env, join_graph, wait_for
-
-    from rig_runtime import Node
 
     join_graph(graph_env(), monkeypatch.setenv)
     args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false"]

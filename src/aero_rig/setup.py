@@ -10,7 +10,7 @@ package_name = "aero_rig"
 setup(
     name=package_name,
     version="0.1.0",
-    packages=[package_name],
+    packages=[package_name, package_name + ".view"],
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -23,6 +23,7 @@ setup(
         "multisine_gen",
         "pitch_actuator",
         "pressure_scanner",
+        "wing_sim",
         "aero_identification",
         "pyyaml>=6",
         "tqdm>=4",
@@ -38,7 +39,7 @@ setup(
     entry_points={
         "console_scripts": [
             "aero-rig = aero_rig.cli:main",
-            "view = aero_rig.view:main",
+            "view = aero_rig.view.node:main",
         ],
     },
 )

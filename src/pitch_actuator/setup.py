@@ -1,6 +1,5 @@
 """ament_python package pitch_actuator (see package.xml)."""
 
-from glob import glob
 from xml.etree import ElementTree
 
 from setuptools import setup
@@ -14,8 +13,6 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/launch", glob("launch/*.py") + glob("launch/*.yaml")),
-        ("share/" + package_name + "/config", glob("config/*.yaml")),
     ],
     package_data={package_name: ["py.typed"]},
     install_requires=["rig_runtime", "numpy>=1.26"],

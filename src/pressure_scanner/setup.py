@@ -28,10 +28,8 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            "sim_wing = pressure_scanner.sim_wing_node:main",
             "lift = pressure_scanner.lift_node:main",
             "scanner = pressure_scanner.scanner_node:main",
-            "sim_scanner = pressure_scanner.sim_scanner:main",
         ],
     },
 )

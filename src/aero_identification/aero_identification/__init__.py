@@ -19,10 +19,11 @@ _EXPORTS = {
     "transient_periods": "data",
     "predict_bla_sine": "metrics",
     "relative_rms_error": "metrics",
-    "LMIteration": "pnlss",
-    "PNLSSModel": "pnlss",
+    "LMIteration": "models",
+    "LinearStateSpace": "models",
+    "PNLSSModel": "models",
+    "StateSpaceDimensions": "models",
     "fit_pnlss": "pnlss",
-    "LinearStateSpace": "subspace",
     "fit_linear_ss": "subspace",
 }
 
@@ -33,6 +34,7 @@ __all__ = [
     "LinearStateSpace",
     "PNLSSModel",
     "PeriodicData",
+    "StateSpaceDimensions",
     "cluster_periods",
     "estimate_bla",
     "fit_linear_ss",

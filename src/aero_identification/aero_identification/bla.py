@@ -19,7 +19,7 @@ from aero_identification.lpm import frf_variance, lpm_periodic
 class BLA:
     """Nonparametric BLA estimate with its variances and output-spectrum levels (SISO).
 
-    Variance convention (DESIGN.md §7): every variance below is of the MEAN estimate `G` as
+    Variance convention (docs/design.md §7): every variance below is of the MEAN estimate `G` as
     returned, i.e. averaged over M realizations and P periods. To get the variance of the FRF of
     one realization G[m] (averaged over its P periods) multiply by M; of the FRF of one period
     of one realization G[m, p] multiply the noise part by M·P. `var_total` includes the
@@ -137,7 +137,7 @@ def estimate_bla(
     """Estimate the BLA, its noise and nonlinear-distortion variances and the output levels.
 
     Methods:
-        "robust": Pintelon & Schoukens 2012 §4.3.1, formulas of DESIGN.md §7. Per period
+        "robust": Pintelon & Schoukens 2012 §4.3.1, formulas of docs/design.md §7. Per period
             G[m, p] = Y/U at the excited lines; G[m] = mean_p G[m, p]; G = mean_m G[m];
             var_noise = (1/M²) Σ_m Σ_p |G[m,p] − G[m]|² / (P(P−1));
             var_total = Σ_m |G[m] − G|² / (M(M−1)). Needs P ≥ 2 and M ≥ 2 and steady state

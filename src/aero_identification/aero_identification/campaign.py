@@ -1,6 +1,6 @@
 """Cutting a campaign's samples into periods and sine records, by the experiment plan.
 
-The generator stamps command sample k at t0 + k/fs (DESIGN.md §5) and publishes the plan with
+The generator stamps command sample k at t0 + k/fs (docs/design.md §5) and publishes the plan with
 ``t0_ns``; measured pitch and C_l keep those stamps, so every sample maps back to its plan index
 k = round((stamp − t0)·fs). :class:`CampaignAssembler` stores, in arrays sized by the plan (so
 memory is bounded however long the run), the samples that fall in measured multisine periods

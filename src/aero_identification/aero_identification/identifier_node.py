@@ -28,10 +28,20 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
-from rig_runtime.anomaly import ANOMALY_QOS, ANOMALY_TOPIC, ANOMALY_TYPE, Anomaly
-from rig_runtime.diagnostics import diagnostic_array
-
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
+from rig_runtime.anomaly import Anomaly
+from rig_runtime.diagnostics import diagnostic_array
+from rig_runtime.interface import (
+    EXPERIMENT_ANOMALY,
+    EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
+    IDENTIFICATION_MODEL,
+    IDENTIFICATION_STATUS,
+    PITCH_JOINT,
+    PITCH_STATE,
+    WING_COEFFICIENTS,
+    joint_position,
+)
 
 from . import refit_worker
 from .campaign import CampaignAssembler
@@ -100,34 +110,47 @@ class Identifier:
         if p["use_worker"]:
             self._start_worker()
         self.model_pub = node.create_publisher(
-            "std_msgs/msg/String", "/identification/model", "latched"
+            IDENTIFICATION_MODEL.type, IDENTIFICATION_MODEL.name, IDENTIFICATION_MODEL.qos
         )
         self.status_pub = node.create_publisher(
-            "diagnostic_msgs/msg/DiagnosticArray", "/identification/status", "latched"
+            IDENTIFICATION_STATUS.type, IDENTIFICATION_STATUS.name, IDENTIFICATION_STATUS.qos
         )
         node.create_subscription(
-            "std_msgs/msg/String", "/experiment/plan", self.on_plan, "latched", required=True
+            EXPERIMENT_PLAN.type,
+            EXPERIMENT_PLAN.name,
+            self.on_plan,
+            EXPERIMENT_PLAN.qos,
+            required=True,
         )
         node.create_subscription(
-            "sensor_msgs/msg/JointState",
-            "/pitch/state",
+            PITCH_STATE.type,
+            PITCH_STATE.name,
             self.on_state,
             p["input_qos"],
             depth=None if p["input_qos"] == "stream" else 2000,
             required=True,
         )
         node.create_subscription(
-            "geometry_msgs/msg/Vector3Stamped",
-            "/wing/coefficients",
+            WING_COEFFICIENTS.type,
+            WING_COEFFICIENTS.name,
             self.on_coefficients,
             p["input_qos"],
             depth=None if p["input_qos"] == "stream" else 2000,
             required=True,
         )
         node.create_subscription(
-            "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events", required=True
+            EXPERIMENT_SEGMENT.type,
+            EXPERIMENT_SEGMENT.name,
+            self.on_segment,
+            EXPERIMENT_SEGMENT.qos,
+            required=True,
         )
-        node.create_subscription(ANOMALY_TYPE, ANOMALY_TOPIC, self.on_anomaly, ANOMALY_QOS)
+        node.create_subscription(
+            EXPERIMENT_ANOMALY.type,
+            EXPERIMENT_ANOMALY.name,
+            self.on_anomaly,
+            EXPERIMENT_ANOMALY.qos,
+        )
         node.create_timer(0.1, self.on_timer)
         node.create_timer(1.0, self.publish_status)
         self.publish_status()
@@ -196,9 +219,8 @@ class Identifier:
         self.last_k[channel] = max(self.last_k[channel], self.assembler.index_of(stamp))
 
     def on_state(self, msg: Any) -> None:
-        names = list(msg.name)
-        i = names.index("pitch") if "pitch" in names else 0
-        value = math.degrees(float(msg.position[i])) if i < len(msg.position) else math.nan
+        pitch = joint_position(msg, PITCH_JOINT)
+        value = math.nan if pitch is None else math.degrees(pitch)
         self._add("u", stamp_to_ns(msg.header.stamp), value)
 
     def on_coefficients(self, msg: Any) -> None:

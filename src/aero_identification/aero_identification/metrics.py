@@ -6,7 +6,7 @@ from aero_identification.bla import BLA
 
 
 def relative_rms_error(y_true: np.ndarray, y_hat: np.ndarray) -> float:
-    """Relative RMS error rms(y − ŷ) / rms(y − mean y) (DESIGN.md §7, the paper's Table 1).
+    """Relative RMS error rms(y − ŷ) / rms(y − mean y) (docs/design.md §7, the paper's Table 1).
 
     Args:
         y_true: measured output, any shape.

@@ -1,4 +1,4 @@
-"""The identification pipeline of a campaign (DESIGN.md §1, §7), shared by the online
+"""The identification pipeline of a campaign (docs/design.md §1, §7), shared by the online
 identifier node and the offline fit from a bag.
 
 Per level: period clustering (k-means; the dominant cluster is kept), robust BLA over the two
@@ -32,9 +32,10 @@ from .clustering import ClusterResult, period_clusters
 from .config import IdentificationConfig
 from .data import PeriodicData, random_phase_period
 from .metrics import predict_bla_sine, relative_rms_error
-from .pnlss import PNLSSModel, fit_pnlss, linear_states, periodic_records
+from .models import LinearStateSpace, PNLSSModel
+from .pnlss import fit_pnlss, linear_states, periodic_records
 from .quality import data_quality, data_quality_lines, data_quality_note
-from .subspace import LinearStateSpace, fit_linear_ss
+from .subspace import fit_linear_ss
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
 

@@ -1,26 +1,8 @@
-"""Polynomial nonlinear state-space (PNLSS) model fitted by Levenberg–Marquardt.
+"""Fit of a polynomial nonlinear state-space (PNLSS) model by Levenberg–Marquardt.
 
-Model (Paduart et al., "Identification of nonlinear systems using polynomial nonlinear state
-space models", Automatica 46(4) 2010):
-
-    x(t+1) = A x(t) + B u(t) + E ζ(x(t), u(t))
-    y(t)   = C x(t) + D u(t) + F η(x(t), u(t))
-
-ζ, η: all monomials of [x; u] of the chosen total degrees, restricted by the structure
-("full", "statesonly", "inputsonly"; see monomials.py). The same monomial set is used in the
-state and the output equation.
-
-Coordinates and operating point (the same convention as subspace.py: the model maps deviations
-around the operating point). Internally everything is normalised so the monomials are well
-conditioned:
-
-    u_n = (u − u_mean) / u_scale,   y = y_mean + y_scale · y_n,
-
-and the states are scaled so that the initial linear model's states have unit standard
-deviation on the training input. A, B, C, D, E, F are stored in these normalised coordinates;
-`simulate` takes and returns absolute signals. u_mean is the training-input mean; y_mean is
-the training-output mean plus the fitted output offset (even-degree monomials have a non-zero
-mean, so the model's output at the operating point is a parameter, not the data mean).
+The model (Paduart et al., "Identification of nonlinear systems using polynomial nonlinear state
+space models", Automatica 46(4) 2010), its monomials, normalised coordinates and operating point
+are described in models.py (PNLSSModel).
 
 Fit (Paduart 2010; the PNLSS toolbox's weighted Levenberg–Marquardt):
 
@@ -45,16 +27,15 @@ Fit (Paduart 2010; the PNLSS toolbox's weighted Levenberg–Marquardt):
 import contextlib
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
 from aero_identification.data import PeriodicData
+from aero_identification.models import STATE_BOUND, LinearStateSpace, LMIteration, PNLSSModel
 from aero_identification.monomials import STRUCTURES, check_degrees, structure_exponents
 from aero_identification.pnlss_kernels import jacobian_records, simulate_records
-from aero_identification.subspace import LinearStateSpace, StateSpaceDimensions, _as_input
 
 try:  # a dependency of scikit-learn; optional here
     from threadpoolctl import ThreadpoolController
@@ -72,186 +53,6 @@ def _one_blas_thread() -> contextlib.AbstractContextManager:
     if ThreadpoolController is None:
         return contextlib.nullcontext()
     return ThreadpoolController().limit(limits=1, user_api="blas")
-
-
-# A normalised state beyond this magnitude (states have unit RMS under the initial linear model)
-# means the simulation diverged: it is stopped there and the trial step rejected.
-STATE_BOUND = 1e4
-
-
-@dataclass(frozen=True)
-class LMIteration:
-    """One Levenberg–Marquardt trial.
-
-    Attributes:
-        iteration: trial number (0 = the initial model).
-        cost: training cost of the trial parameters: mean squared (weighted) simulation error
-            in normalised output units; inf if the simulation diverged.
-        cost_val: validation mean squared error [output units²] (nan without validation, inf if
-            the validation simulation diverged).
-        lambda_: damping λ used for the step (relative to the largest singular value of the
-            normalised Jacobian; nan for iteration 0).
-        accepted: whether the step was kept.
-    """
-
-    iteration: int
-    cost: float
-    cost_val: float
-    lambda_: float
-    accepted: bool
-
-
-@dataclass(eq=False)
-class PNLSSModel(StateSpaceDimensions):
-    """A PNLSS model in normalised coordinates (module docstring).
-
-    Attributes:
-        A: (nx, nx); B: (nx, nu); C: (ny, nx); D: (ny, nu) linear part.
-        E: (nx, Kζ) coefficients of the state-equation monomials.
-        F: (ny, Kη) coefficients of the output-equation monomials.
-        exponents_state: (Kζ, nx+nu) int exponents of ζ.
-        exponents_output: (Kη, nx+nu) int exponents of η.
-        u_mean, u_scale: (nu,) input normalisation.
-        y_mean, y_scale: (ny,) output normalisation (y_mean includes the fitted offset).
-        fs: sampling frequency [Hz].
-        degrees: total degrees of the monomials.
-        structure: "full", "statesonly" or "inputsonly".
-        n_transient: samples prepended per record during the fit.
-        history_: the LM trials (fit only; not serialised).
-        cost_: training cost of this model (normalised output units², see LMIteration.cost).
-        cost_val_: validation mean squared error of this model [output units²].
-    """
-
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    E: np.ndarray
-    F: np.ndarray
-    exponents_state: np.ndarray
-    exponents_output: np.ndarray
-    u_mean: np.ndarray
-    u_scale: np.ndarray
-    y_mean: np.ndarray
-    y_scale: np.ndarray
-    fs: float
-    degrees: tuple[int, ...]
-    structure: str
-    n_transient: int = 0
-    history_: list[LMIteration] = field(default_factory=list)
-    cost_: float = float("nan")
-    cost_val_: float = float("nan")
-
-    def __post_init__(self) -> None:
-        for name in ("A", "B", "C", "D", "E", "F"):
-            setattr(self, name, np.ascontiguousarray(np.asarray(getattr(self, name), float)))
-        nx, nu, ny = self.A.shape[0], self.B.shape[1], self.C.shape[0]
-        self.exponents_state = np.ascontiguousarray(
-            np.asarray(self.exponents_state, dtype=np.int64).reshape(-1, nx + nu)
-        )
-        self.exponents_output = np.ascontiguousarray(
-            np.asarray(self.exponents_output, dtype=np.int64).reshape(-1, nx + nu)
-        )
-        expect = {
-            "A": (nx, nx), "B": (nx, nu), "C": (ny, nx), "D": (ny, nu),
-            "E": (nx, self.exponents_state.shape[0]), "F": (ny, self.exponents_output.shape[0]),
-        }  # fmt: skip
-        for name, shape in expect.items():
-            if getattr(self, name).shape != shape:
-                raise ValueError(
-                    f"PNLSS matrix {name} has shape {getattr(self, name).shape}; expected {shape}"
-                )
-        for name, n in (("u_mean", nu), ("u_scale", nu), ("y_mean", ny), ("y_scale", ny)):
-            v = np.asarray(getattr(self, name), dtype=float).reshape(-1)
-            if v.size != n:
-                raise ValueError(f"{name} must have {n} entries; got {v.size}")
-            setattr(self, name, v)
-        self.fs = float(self.fs)
-        self.degrees = tuple(int(d) for d in self.degrees)
-
-    @property
-    def parameters(self) -> np.ndarray:
-        """(n_θ,) θ = [vec A, vec B, vec E, vec C, vec D, vec F] (row-major, normalised)."""
-        return np.concatenate([m.ravel() for m in (self.A, self.B, self.E, self.C, self.D, self.F)])
-
-    def simulate(self, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
-        """Simulate the output for the input u (absolute signals).
-
-        Args:
-            u: (T,) or (T, nu) input samples.
-            x0: (nx,) initial normalised state; default 0 (the operating point).
-
-        Returns:
-            (T,) output for a 1-D u and ny == 1, else (T, ny). Samples after a divergence
-            (a normalised state beyond STATE_BOUND) are NaN.
-        """
-        u2, one_d = _as_input(u, self.nu)
-        x = np.zeros(self.nx) if x0 is None else np.asarray(x0, dtype=float).reshape(self.nx)
-        un = (u2 - self.u_mean) / self.u_scale
-        yn = simulate_records(
-            self.A, self.B, self.C, self.D, self.E, self.F, self.exponents_state,
-            self.exponents_output, un[None], x[None], STATE_BOUND,
-        )[0]  # fmt: skip
-        y = self.y_mean + self.y_scale * yn
-        return y[:, 0] if (one_d and self.ny == 1) else y
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dictionary of the model (json.dumps works); inverse of `from_dict`."""
-        return {
-            "kind": "pnlss",
-            "A": self.A.tolist(),
-            "B": self.B.tolist(),
-            "C": self.C.tolist(),
-            "D": self.D.tolist(),
-            "E": self.E.tolist(),
-            "F": self.F.tolist(),
-            "exponents_state": self.exponents_state.tolist(),
-            "exponents_output": self.exponents_output.tolist(),
-            "u_mean": self.u_mean.tolist(),
-            "u_scale": self.u_scale.tolist(),
-            "y_mean": self.y_mean.tolist(),
-            "y_scale": self.y_scale.tolist(),
-            "fs": self.fs,
-            "degrees": list(self.degrees),
-            "structure": self.structure,
-            "n_transient": int(self.n_transient),
-            "cost": _json_float(self.cost_),
-            "cost_val": _json_float(self.cost_val_),
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "PNLSSModel":
-        """Rebuild a model from `to_dict` output."""
-        if d.get("kind") != "pnlss":
-            raise ValueError(
-                f"not a PNLSS dictionary (kind={d.get('kind')!r}); expected the output of "
-                "PNLSSModel.to_dict()"
-            )
-        nx = len(d["A"])
-        ny = len(d["C"])
-        return cls(
-            A=np.asarray(d["A"], float).reshape(nx, nx),
-            B=np.asarray(d["B"], float).reshape(nx, -1),
-            C=np.asarray(d["C"], float).reshape(ny, nx),
-            D=np.asarray(d["D"], float).reshape(ny, -1),
-            E=np.asarray(d["E"], float).reshape(nx, -1),
-            F=np.asarray(d["F"], float).reshape(ny, -1),
-            exponents_state=np.asarray(d["exponents_state"], np.int64),
-            exponents_output=np.asarray(d["exponents_output"], np.int64),
-            u_mean=np.asarray(d["u_mean"]), u_scale=np.asarray(d["u_scale"]),
-            y_mean=np.asarray(d["y_mean"]), y_scale=np.asarray(d["y_scale"]),
-            fs=d["fs"], degrees=tuple(d["degrees"]), structure=d["structure"],
-            n_transient=d.get("n_transient", 0),
-            cost_=_from_json_float(d.get("cost")), cost_val_=_from_json_float(d.get("cost_val")),
-        )  # fmt: skip
-
-
-def _json_float(v: float) -> float | None:
-    return float(v) if math.isfinite(v) else None
-
-
-def _from_json_float(v: float | None) -> float:
-    return float("nan") if v is None else float(v)
 
 
 # --- parameter vector -----------------------------------------------------------------------

@@ -18,207 +18,23 @@ Models returned are always stable (all eigenvalues of A inside the unit circle):
 eigenvalues of a candidate are reflected into the unit circle (z ↦ 1/z̄, which keeps the
 magnitude response shape) and B, D re-fitted; a refinement that ends unstable is discarded.
 
-Operating-point convention (the same in pnlss.py): a model maps deviations around the
-operating point, y − y_mean = G (u − u_mean). `simulate(u)` takes and returns absolute
-signals. A BLA carries no DC information, so `fit_linear_ss` returns u_mean = y_mean = 0; set
-them from the training data with `with_operating_point` before simulating absolute signals.
+The model itself (LinearStateSpace) and its operating-point convention are in models.py. A BLA
+carries no DC information, so `fit_linear_ss` returns u_mean = y_mean = 0; set them from the
+training data with `with_operating_point` before simulating absolute signals.
 """
 
 import math
-from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 import scipy.linalg
 import scipy.optimize
 
 from aero_identification.bla import BLA
+from aero_identification.models import LinearStateSpace, _frf
 
 # Largest eigenvalue modulus accepted for a "stable" model; reflected/clipped poles land at or
 # below it (a pole on the unit circle would be an integrator, not identifiable from the BLA).
 MAX_POLE_RADIUS = 0.9999
-
-
-class StateSpaceDimensions:
-    """nx, nu, ny of a model with A (nx, nx), B (nx, nu) and C (ny, nx) attributes."""
-
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-
-    @property
-    def nx(self) -> int:
-        return int(self.A.shape[0])
-
-    @property
-    def nu(self) -> int:
-        return int(self.B.shape[1])
-
-    @property
-    def ny(self) -> int:
-        return int(self.C.shape[0])
-
-
-@dataclass(eq=False)
-class LinearStateSpace(StateSpaceDimensions):
-    """Discrete-time linear state-space model x(t+1) = A x + B u, y = C x + D u.
-
-    Attributes:
-        A: (nx, nx) state matrix (all eigenvalues inside the unit circle).
-        B: (nx, nu) input matrix.
-        C: (ny, nx) output matrix.
-        D: (ny, nu) feed-through.
-        fs: sampling frequency [Hz]; z = exp(j2π f/fs).
-        r: block rows used by the subspace step (0 if not from subspace).
-        cost: variance-weighted cost Σ|G_model − G|²/var on the data it was selected on (the
-            BLA, or the validation BLA when one was given).
-        u_mean: (nu,) input operating point (deviation convention in the module docstring).
-        y_mean: (ny,) output operating point.
-        refined: whether the weighted least-squares refinement was kept.
-        weighting: which variance weighted the fit: "total", "noise" or "none".
-    """
-
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    fs: float
-    r: int = 0
-    cost: float = float("nan")
-    u_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    y_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    refined: bool = False
-    weighting: str = "none"
-
-    def __post_init__(self) -> None:
-        # C-contiguous float64: the compiled simulation kernel is specialised on the layout.
-        self.A = np.ascontiguousarray(np.atleast_2d(np.asarray(self.A, dtype=float)))
-        self.B = np.ascontiguousarray(np.atleast_2d(np.asarray(self.B, dtype=float)))
-        self.C = np.ascontiguousarray(np.atleast_2d(np.asarray(self.C, dtype=float)))
-        self.D = np.ascontiguousarray(np.atleast_2d(np.asarray(self.D, dtype=float)))
-        nx, nu, ny = self.A.shape[0], self.B.shape[1], self.C.shape[0]
-        if self.A.shape != (nx, nx) or self.B.shape[0] != nx or self.C.shape[1] != nx:
-            raise ValueError(
-                f"inconsistent state-space shapes A {self.A.shape}, B {self.B.shape}, "
-                f"C {self.C.shape}; need (nx, nx), (nx, nu), (ny, nx)"
-            )
-        if self.D.shape != (ny, nu):
-            raise ValueError(f"D must have shape (ny, nu)={(ny, nu)}; got {self.D.shape}")
-        self.u_mean = _operating_point(self.u_mean, nu, "u_mean")
-        self.y_mean = _operating_point(self.y_mean, ny, "y_mean")
-        self.fs = float(self.fs)
-
-    @property
-    def order(self) -> int:
-        """The model order nx."""
-        return self.nx
-
-    def poles(self) -> np.ndarray:
-        """(nx,) complex eigenvalues of A (discrete-time poles)."""
-        return np.linalg.eigvals(self.A)
-
-    def is_stable(self) -> bool:
-        """True when every pole lies strictly inside the unit circle."""
-        return bool(np.all(np.abs(self.poles()) < 1.0))
-
-    def with_operating_point(self, u_mean: Any, y_mean: Any) -> "LinearStateSpace":
-        """Copy of the model with the operating point (e.g. training-data means) set."""
-        return replace(
-            self, A=self.A.copy(), B=self.B.copy(), C=self.C.copy(), D=self.D.copy(),
-            u_mean=np.atleast_1d(u_mean), y_mean=np.atleast_1d(y_mean),
-        )  # fmt: skip
-
-    def frf(self, freq_hz: np.ndarray) -> np.ndarray:
-        """Frequency response G(z) = C (zI − A)⁻¹ B + D at z = exp(j2π f/fs).
-
-        Args:
-            freq_hz: (F,) frequencies [Hz].
-
-        Returns:
-            (F,) complex for a SISO model, (F, ny, nu) otherwise.
-        """
-        z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float).reshape(-1) / self.fs)
-        G = _frf(self.A, self.B, self.C, self.D, z)
-        return G[:, 0, 0] if (self.ny == 1 and self.nu == 1) else G
-
-    def simulate(self, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
-        """Simulate the output for the input u (absolute signals, see the module docstring).
-
-        Args:
-            u: (T,) or (T, nu) input samples.
-            x0: (nx,) initial state (deviation from the operating point); default 0.
-
-        Returns:
-            (T,) output for a 1-D u and ny == 1, else (T, ny).
-        """
-        from aero_identification.pnlss_kernels import simulate_records
-
-        u2, one_d = _as_input(u, self.nu)
-        x = np.zeros(self.nx) if x0 is None else np.asarray(x0, dtype=float).reshape(self.nx)
-        empty_exp = np.zeros((0, self.nx + self.nu), dtype=np.int64)
-        y = simulate_records(
-            self.A, self.B, self.C, self.D, np.zeros((self.nx, 0)), np.zeros((self.ny, 0)),
-            empty_exp, empty_exp, (u2 - self.u_mean)[None], x[None], np.inf,
-        )[0] + self.y_mean  # fmt: skip
-        return y[:, 0] if (one_d and self.ny == 1) else y
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dictionary (json.dumps works); inverse of `from_dict`."""
-        return {
-            "kind": "linear_state_space",
-            "A": self.A.tolist(),
-            "B": self.B.tolist(),
-            "C": self.C.tolist(),
-            "D": self.D.tolist(),
-            "fs": self.fs,
-            "order": self.order,
-            "r": int(self.r),
-            "cost": float(self.cost) if math.isfinite(self.cost) else None,
-            "u_mean": self.u_mean.tolist(),
-            "y_mean": self.y_mean.tolist(),
-            "refined": bool(self.refined),
-            "weighting": self.weighting,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "LinearStateSpace":
-        """Rebuild a model from `to_dict` output."""
-        if d.get("kind") != "linear_state_space":
-            raise ValueError(
-                f"not a linear state-space dictionary (kind={d.get('kind')!r}); expected "
-                "the output of LinearStateSpace.to_dict()"
-            )
-        return cls(
-            A=np.asarray(d["A"], dtype=float).reshape(len(d["A"]), -1),
-            B=np.asarray(d["B"], dtype=float).reshape(len(d["A"]), -1),
-            C=np.asarray(d["C"], dtype=float).reshape(-1, len(d["A"])),
-            D=np.asarray(d["D"], dtype=float),
-            fs=d["fs"], r=d["r"],
-            cost=float("nan") if d["cost"] is None else d["cost"],
-            u_mean=np.asarray(d["u_mean"]), y_mean=np.asarray(d["y_mean"]),
-            refined=d["refined"], weighting=d["weighting"],
-        )  # fmt: skip
-
-
-def _operating_point(value: Any, n: int, name: str) -> np.ndarray:
-    v = np.asarray(value, dtype=float).reshape(-1)
-    if v.size == 0:
-        return np.zeros(n)
-    if v.size != n:
-        raise ValueError(f"{name} must have {n} entries (one per signal); got {v.size}")
-    return v
-
-
-def _as_input(u: np.ndarray, nu: int) -> tuple[np.ndarray, bool]:
-    """(T, nu) float64 C-contiguous input, and whether the caller gave a 1-D array."""
-    u = np.asarray(u, dtype=float)
-    one_d = u.ndim == 1
-    u2 = u[:, None] if one_d else u
-    if u2.ndim != 2 or u2.shape[1] != nu:
-        raise ValueError(f"u must have shape (T,) or (T, nu) with nu={nu}; got {u.shape}")
-    if not np.all(np.isfinite(u2)):
-        raise ValueError("u contains NaN or inf; clean the input record before simulating")
-    return np.ascontiguousarray(u2), one_d
 
 
 # --- frequency-response helpers -------------------------------------------------------------
@@ -232,16 +48,6 @@ def _resolvents(A: np.ndarray, B: np.ndarray, C: np.ndarray, z: np.ndarray):
     Ct = np.broadcast_to(C.T.astype(complex), (z.size, *C.T.shape))
     L = np.swapaxes(np.linalg.solve(np.swapaxes(Zi, 1, 2), Ct), 1, 2)  # (C (zI − A)⁻¹)ᵀ solved
     return L, R
-
-
-def _frf(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """(F, ny, nu) G(z_k) = C (z_k I − A)⁻¹ B + D."""
-    nx = A.shape[0]
-    if nx == 0:
-        return np.broadcast_to(D.astype(complex), (z.size, *D.shape)).copy()
-    Zi = z[:, None, None] * np.eye(nx)[None] - A[None]
-    R = np.linalg.solve(Zi, np.broadcast_to(B.astype(complex), (z.size, *B.shape)))
-    return C[None] @ R + D[None]
 
 
 def weighted_cost(G_model: np.ndarray, G: np.ndarray, var: np.ndarray) -> float:

@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
-from aero_identification.data import random_phase_period
-from aero_identification.lpm import lpm_periodic
 from scipy.signal import freqz, lfilter
 
 from aero_identification import PeriodicData, estimate_bla
+from aero_identification.data import random_phase_period
+from aero_identification.lpm import lpm_periodic
 
 N, P = 256, 4
 FS = 100.0

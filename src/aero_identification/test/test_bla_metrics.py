@@ -2,8 +2,6 @@
 
 import numpy as np
 import pytest
-from aero_identification.data import random_phase_period
-from aero_identification.metrics import interpolate_frf
 from scipy.signal import freqz, lfilter
 
 from aero_identification import (
@@ -13,6 +11,8 @@ from aero_identification import (
     predict_bla_sine,
     relative_rms_error,
 )
+from aero_identification.data import random_phase_period
+from aero_identification.metrics import interpolate_frf
 
 FS = 200.0
 N, P, M = 1000, 3, 4  # 0.2 Hz resolution, odd lines 0.2 … 7.8 Hz

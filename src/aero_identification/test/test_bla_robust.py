@@ -4,11 +4,11 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
-from aero_identification.bla import detection_lines
-from aero_identification.data import random_phase_period
 from scipy.signal import freqz, lfilter
 
 from aero_identification import BLA, PeriodicData, estimate_bla
+from aero_identification.bla import detection_lines
+from aero_identification.data import random_phase_period
 
 N, P, M = 512, 4, 8
 FS = 200.0

@@ -1,10 +1,10 @@
 """k-means clustering of periods: two flow regimes split, homogeneous periods stay together."""
 
 import numpy as np
-from aero_identification.clustering import period_clusters
-from aero_identification.data import random_phase_period
 
 from aero_identification import PeriodicData, cluster_periods
+from aero_identification.clustering import period_clusters
+from aero_identification.data import random_phase_period
 
 N = 400
 

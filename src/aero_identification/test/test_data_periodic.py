@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
-from aero_identification.data import random_phase_period, transient_ratio
 from scipy.signal import lfilter
 
 from aero_identification import PeriodicData, transient_periods
+from aero_identification.data import random_phase_period, transient_ratio
 
 
 def test_shape_and_line_errors_say_what_is_wrong() -> None:

@@ -8,10 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+
 from aero_identification.bla import BLA
 from aero_identification.data import PeriodicData
-from aero_identification.pnlss import PNLSSModel, fit_pnlss
-from aero_identification.subspace import LinearStateSpace, fit_linear_ss
+from aero_identification.models import LinearStateSpace, PNLSSModel
+from aero_identification.pnlss import fit_pnlss
+from aero_identification.subspace import fit_linear_ss
 
 N = 1024  # samples per period
 P = 3  # periods per realization

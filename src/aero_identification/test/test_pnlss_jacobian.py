@@ -4,6 +4,7 @@ from math import comb
 
 import numpy as np
 import pytest
+
 from aero_identification.monomials import (
     evaluate_monomials,
     monomial_exponents,

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from aero_identification import BLA, PeriodicData, estimate_bla
 from aero_identification.data import random_phase_period
 from aero_identification.report import (
     plot_cl_alpha,
@@ -15,8 +17,6 @@ from aero_identification.report import (
     plot_time_series,
     table1,
 )
-
-from aero_identification import BLA, PeriodicData, estimate_bla
 
 LEVELS = ["low", "medium", "high"]
 FREQS = [0.4, 1.0, 1.6]

@@ -4,9 +4,10 @@ import json
 
 import numpy as np
 import pytest
+
 from aero_identification.bla import BLA
+from aero_identification.models import LinearStateSpace
 from aero_identification.subspace import (
-    LinearStateSpace,
     fit_linear_ss,
     smooth_variance,
     stabilize,

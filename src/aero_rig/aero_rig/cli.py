@@ -28,6 +28,7 @@ from typing import Any
 
 from aero_identification.quality import data_quality_lines
 from rig_runtime.graph import GraphError, GraphSpec, load_graph, package_share
+from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, IDENTIFICATION_STATUS
 from rig_runtime.launcher import Launcher, parse_overrides
 
 from .verdict import run_problems
@@ -76,13 +77,16 @@ class CampaignMonitor:
         self.state = ""
         self.model: dict[str, Any] | None = None
         self.node.create_subscription(
-            "std_msgs/msg/String", "/experiment/plan", self._plan, "latched"
+            EXPERIMENT_PLAN.type, EXPERIMENT_PLAN.name, self._plan, EXPERIMENT_PLAN.qos
         )
         self.node.create_subscription(
-            "std_msgs/msg/String", "/experiment/segment", self._segment, "events"
+            EXPERIMENT_SEGMENT.type, EXPERIMENT_SEGMENT.name, self._segment, EXPERIMENT_SEGMENT.qos
         )
         self.node.create_subscription(
-            "diagnostic_msgs/msg/DiagnosticArray", "/identification/status", self._status, "latched"
+            IDENTIFICATION_STATUS.type,
+            IDENTIFICATION_STATUS.name,
+            self._status,
+            IDENTIFICATION_STATUS.qos,
         )
 
     def _plan(self, msg: Any) -> None:

@@ -21,10 +21,18 @@ from aero_identification.pipeline import (
     identify,
     write_report,
 )
-from rig_runtime.anomaly import ANOMALY_TOPIC, Anomaly
+from rig_runtime.anomaly import Anomaly
+from rig_runtime.interface import (
+    EXPERIMENT_ANOMALY,
+    EXPERIMENT_PLAN,
+    PITCH_JOINT,
+    PITCH_STATE,
+    WING_COEFFICIENTS,
+    joint_position,
+)
 from rig_runtime.messages import stamp_to_ns
 
-REQUIRED_TOPICS = ("/experiment/plan", "/pitch/state", "/wing/coefficients")
+REQUIRED_TOPICS = (EXPERIMENT_PLAN.name, PITCH_STATE.name, WING_COEFFICIENTS.name)
 
 
 class BagError(ValueError):
@@ -67,27 +75,30 @@ def read_campaign_bag(bag: str | Path) -> BagData:
             raise BagError(
                 f"bag {path} lacks topic(s) {missing} needed for a fit; it has {sorted(topics)}"
             )
-        plan_conns = [c for c in reader.connections if c.topic == "/experiment/plan"]
+        plan_conns = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
         plan: dict[str, Any] | None = None
         for conn, _, raw in reader.messages(connections=plan_conns):
             plan = json.loads(reader.deserialize(raw, conn.msgtype).data)
         if plan is None or "t0_ns" not in plan:
             raise BagError(f"bag {path}: /experiment/plan holds no plan with t0_ns")
         assembler = CampaignAssembler(plan, int(plan["t0_ns"]))
-        wanted = [c for c in reader.connections if c.topic in (*REQUIRED_TOPICS[1:], ANOMALY_TOPIC)]
+        wanted = [
+            c
+            for c in reader.connections
+            if c.topic in (*REQUIRED_TOPICS[1:], EXPERIMENT_ANOMALY.name)
+        ]
         count = 0
         try:
             for conn, _, raw in reader.messages(connections=wanted):
                 msg = reader.deserialize(raw, conn.msgtype)
-                if conn.topic == ANOMALY_TOPIC:
+                if conn.topic == EXPERIMENT_ANOMALY.name:
                     a = Anomaly.from_json(msg.data)  # a later record of the same id replaces it
                     assembler.add_anomaly(a.id, a.first_ns, a.last_ns, a.label())
                     continue
                 stamp = stamp_to_ns(msg.header.stamp)
-                if conn.topic == "/pitch/state":
-                    names = list(msg.name)
-                    i = names.index("pitch") if "pitch" in names else 0
-                    assembler.add("u", stamp, math.degrees(float(msg.position[i])))
+                if conn.topic == PITCH_STATE.name:
+                    pitch = joint_position(msg, PITCH_JOINT)
+                    assembler.add("u", stamp, math.nan if pitch is None else math.degrees(pitch))
                 else:
                     assembler.add("y", stamp, float(msg.vector.x))
                 count += 1

@@ -10,10 +10,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
 from multisine_gen.plan import ExperimentPlan
 from pitch_actuator.dynamics import ActuatorModel
 from pressure_scanner.integration import PressureIntegrator
-from pressure_scanner.plant import WingPlant
+from wing_sim.plant import WingPlant
 
 T0_NS = 1_700_000_000_000_000_000  # the plan's t0 for simulated runs
 

@@ -17,9 +17,11 @@ import json
 from pathlib import Path
 
 import yaml
-from aero_identification.quality import data_quality_lines
 
-STREAM_TOPICS = ("/pitch/command", "/pitch/state", "/pressure/taps", "/wing/coefficients")
+from aero_identification.quality import data_quality_lines
+from rig_runtime.interface import PITCH_COMMAND, PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
+
+STREAM_TOPICS = (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name)
 
 
 def bag_topic_counts(bag: Path) -> dict[str, int]:

@@ -14,15 +14,16 @@ from typing import Any
 
 import pytest
 import yaml
-from aero_rig.launch_description import DESIGN_TOPICS
+
 from rig_runtime.graph import NodeSpec, entry_point, load_graph
+from rig_runtime.interface import RECORDED_TOPICS
 from rig_runtime.params import Parameter, ParameterError, resolve_parameters
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 GRAPHS = ("sim.yaml", "rig.yaml", "live_view.yaml")
 # Values deliberately different from the node's default in the shared files (file, key).
 NOT_DEFAULT = {
-    ("recorder.yaml", "topics"),  # the DESIGN.md §4 topics instead of everything
+    ("recorder.yaml", "topics"),  # the docs/design.md §4 topics instead of everything
     ("view.yaml", "mode"),  # a live view opens a viewer (the node's default only saves)
 }
 
@@ -238,9 +239,9 @@ def test_lift_qos_matches_its_publishers(graph: str, publishers: dict[str, str])
 
 
 @pytest.mark.parametrize("graph", ["sim.yaml", "rig.yaml"])
-def test_recorder_records_the_design_topics(graph: str) -> None:
+def test_recorder_records_the_contracts_topics(graph: str) -> None:
     recorder = _resolve(load_graph(CONFIG / graph).node("recorder"))
-    assert set(DESIGN_TOPICS) <= set(recorder["topics"])
+    assert recorder["topics"] == [t.name for t in RECORDED_TOPICS]
     assert recorder["output"] == "", "the bag directory is chosen per run"
 
 

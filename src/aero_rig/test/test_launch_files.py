@@ -18,7 +18,9 @@ from typing import Any
 
 import pytest
 import yaml
+
 from rig_runtime.graph import entry_point, load_graph
+from rig_runtime.interface import IDENTIFICATION_MODEL, PITCH_COMMAND, WING_COEFFICIENTS
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 LAUNCH = PACKAGE_DIR / "launch"
@@ -251,7 +253,7 @@ def test_record_adds_a_conditional_ros2_bag_record(
     recorder_file = yaml.safe_load((CONFIG / "recorder.yaml").read_text())
     topics = recorder_file["recorder"]["ros__parameters"]["topics"]
     assert cmd[cmd.index("-o") + 2 :] == topics
-    assert "/wing/coefficients" in topics and "/identification/model" in topics
+    assert WING_COEFFICIENTS.name in topics and IDENTIFICATION_MODEL.name in topics
 
 
 @pytest.mark.usefixtures("ros_stubs")
@@ -267,10 +269,10 @@ def test_default_run_dir_is_new_per_run(tmp_path: Path, monkeypatch: pytest.Monk
 
 @pytest.mark.usefixtures("ros_stubs")
 def test_a_used_run_dir_is_refused(tmp_path: Path) -> None:
-    from aero_rig.launch_description import GraphFileError
+    from rig_runtime.graph import GraphError
 
     (tmp_path / "models.json").write_text("{}")
-    with pytest.raises(GraphFileError, match="not empty"):
+    with pytest.raises(GraphError, match="not empty"):
         _launch("sim.launch.py", run_dir=str(tmp_path))
 
 
@@ -312,34 +314,40 @@ def test_graph_argument_runs_any_graph_file(tmp_path: Path) -> None:
     ]
     assert node["remappings"] == [("/chatter", "/bench/chatter")]
     assert isinstance(node["on_exit"](Exited(0), None)[0], Shutdown)
-    # No recorder in this graph: record:=true falls back to the DESIGN.md §4 topics.
-    assert "/pitch/command" in _bag_record(actions).kwargs["cmd"]
+    # No recorder in this graph: record:=true falls back to the docs/design.md §4 topics.
+    assert PITCH_COMMAND.name in _bag_record(actions).kwargs["cmd"]
 
 
 @pytest.mark.usefixtures("ros_stubs")
 def test_bad_graphs_are_refused_with_a_reason(tmp_path: Path) -> None:
-    from aero_rig.launch_description import GraphFileError
+    from rig_runtime.graph import GraphError
 
     run = str(tmp_path / "run")
-    with pytest.raises(GraphFileError, match="must never run in an rclpy process"):
+    with pytest.raises(GraphError, match="must never run in an rclpy process"):
         _launch("sim.launch.py", graph="live_view", run_dir=run)
-    with pytest.raises(GraphFileError, match="not found"):
+    with pytest.raises(GraphError, match="not found"):
         _launch("sim.launch.py", graph="no_such_graph", run_dir=run)
     (tmp_path / "typo.yaml").write_text(
         "nodes:\n  - {name: lift, package: pressure_scanner, executable: lift,"
         " parameters: [lfit.yaml]}\n"
     )
-    with pytest.raises(GraphFileError, match="no parameter file"):
+    with pytest.raises(GraphError, match=r"parameter file .* does not exist"):
         _launch("sim.launch.py", graph=str(tmp_path / "typo.yaml"), run_dir=run)
     assert not (tmp_path / "run").exists(), "a refused graph must not leave a run directory"
 
 
 def test_launch_module_imports_no_middleware_and_no_rerun() -> None:
-    """The `ros2 launch` process imports rclpy: it must not load the venv's DDS or rerun."""
+    """The `ros2 launch` process imports rclpy: it must not load the venv's DDS or rerun.
+
+    Of rig_runtime it may load only the light modules: the package (lazy), the graph model
+    and the interface contract, which import the standard library and pyyaml.
+    """
+    light = ("rig_runtime", "rig_runtime.graph", "rig_runtime.interface")
     code = (
         "import sys, aero_rig.launch_description\n"
-        "bad = sorted(m for m in sys.modules"
-        " if m.split('.')[0] in ('rig_runtime', 'cyclonedds', 'rerun', 'numpy'))\n"
+        f"light = {light!r}\n"
+        "bad = sorted(m for m in sys.modules if m not in light and m.split('.')[0] in"
+        " ('rig_runtime', 'cyclonedds', 'rosbags', 'rerun', 'numpy', 'rclpy'))\n"
         "print(bad); sys.exit(1 if bad else 0)\n"
     )
     result = subprocess.run(

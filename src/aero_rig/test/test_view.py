@@ -17,24 +17,34 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pytest
-from pressure_scanner.tap_cloud import fill_cloud
-from pressure_scanner.taps import load_taps
-from pressure_scanner.wing_params import WingParams
 from rerun.chunk import RrdReader
-from rig_runtime.messages import new_message, serialize, set_stamp, typestore
-from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from aero_rig import view as rig_view
+from pressure_scanner.rig_geometry import RigGeometry
+from pressure_scanner.tap_cloud import fill_cloud
+from pressure_scanner.taps import load_taps
+from rig_runtime.interface import (
+    EXPERIMENT_SEGMENT,
+    IDENTIFICATION_MODEL,
+    IDENTIFICATION_STATUS,
+    PITCH_COMMAND,
+    PITCH_JOINT,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    WING_COEFFICIENTS,
+)
+from rig_runtime.messages import new_message, serialize, set_stamp, typestore
+from rig_runtime.node import Node
+from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 
 T0 = 1_700_000_000_000_000_000  # ns
 FS = 200.0
 N = 200  # samples (1 s)
 NAN_CL_K = 57  # this coefficients sample is invalid (NaN)
 NAN_TAP_K = 20  # this taps sample has a missing tap (a logged one: 20 % 10 == 0)
-Q = WingParams().dynamic_pressure_pa
-CHORD = WingParams().chord_m
+Q = RigGeometry().dynamic_pressure_pa
+CHORD = RigGeometry().chord_m
 TAPS = load_taps(None)
 
 
@@ -113,8 +123,8 @@ def messages() -> list[tuple[int, str, Any]]:
     for k in range(N):
         t = stamp(k)
         rad = math.radians(alpha_deg(k))
-        for topic in ("/pitch/command", "/pitch/state"):
-            msg = new_message("sensor_msgs/msg/JointState", name=["pitch"], position=[rad])
+        for topic in (PITCH_COMMAND.name, PITCH_STATE.name):
+            msg = new_message("sensor_msgs/msg/JointState", name=[PITCH_JOINT], position=[rad])
             set_stamp(msg.header.stamp, t)
             out.append((t, topic, msg))
         pressures = Q * cp_true()
@@ -122,11 +132,11 @@ def messages() -> list[tuple[int, str, Any]]:
             pressures[5] = np.nan
         cloud = fill_cloud(new_message("sensor_msgs/msg/PointCloud2"), new_message, xyz, pressures)
         set_stamp(cloud.header.stamp, t)
-        out.append((t + 1, "/pressure/taps", cloud))
+        out.append((t + 1, PRESSURE_TAPS.name, cloud))
         coeff = new_message("geometry_msgs/msg/Vector3Stamped")
         coeff.vector.x = math.nan if k == NAN_CL_K else 0.104 * alpha_deg(k)
         set_stamp(coeff.header.stamp, t)
-        out.append((t + 2, "/wing/coefficients", coeff))
+        out.append((t + 2, WING_COEFFICIENTS.name, coeff))
     string = "std_msgs/msg/String"
     for k, event in (
         (0, {"event": "start", "kind": "multisine", "level": 0, "realization": 1, "period": 2}),
@@ -136,13 +146,13 @@ def messages() -> list[tuple[int, str, Any]]:
         edge = {"start": "start_stamp_s", "end": "end_stamp_s"}
         if event["event"] in edge:
             event[edge[event["event"]]] = stamp(k) / 1e9
-        out.append((stamp(k), "/experiment/segment", new_message(string, data=json.dumps(event))))
+        out.append((stamp(k), EXPERIMENT_SEGMENT.name, new_message(string, data=json.dumps(event))))
     first = model_json(1, ["sine level 0 1.0 Hz", "sine level 0 0.4 Hz"], 2)
     second = model_json(2, ["sine level 0 1.0 Hz"], 1)  # one prediction, one cluster fewer
-    out.append((stamp(100), "/identification/model", new_message(string, data=first)))
-    out.append((stamp(199), "/identification/model", new_message(string, data=second)))
+    out.append((stamp(100), IDENTIFICATION_MODEL.name, new_message(string, data=first)))
+    out.append((stamp(199), IDENTIFICATION_MODEL.name, new_message(string, data=second)))
     for k, text in ((50, "buffering"), (60, "buffering"), (70, "refit 1 done")):
-        out.append((stamp(k), "/identification/status", status_msg(k, text)))
+        out.append((stamp(k), IDENTIFICATION_STATUS.name, status_msg(k, text)))
     out.sort(key=lambda item: item[0])
     return out
 
@@ -369,20 +379,20 @@ def test_view_node_records_what_it_receives_over_dds(
     join_graph(env, monkeypatch.setenv)
     rrd_path = tmp_path / "live" / "view.rrd"
     topics = {
-        "/pitch/command": ("sensor_msgs/msg/JointState", "stream"),
-        "/pitch/state": ("sensor_msgs/msg/JointState", "stream"),
-        "/pressure/taps": ("sensor_msgs/msg/PointCloud2", "stream"),
-        "/wing/coefficients": ("geometry_msgs/msg/Vector3Stamped", "stream"),
-        "/experiment/segment": ("std_msgs/msg/String", "events"),
-        "/identification/model": ("std_msgs/msg/String", "latched"),
-        "/identification/status": ("diagnostic_msgs/msg/DiagnosticArray", "latched"),
+        PITCH_COMMAND.name: ("sensor_msgs/msg/JointState", "stream"),
+        PITCH_STATE.name: ("sensor_msgs/msg/JointState", "stream"),
+        PRESSURE_TAPS.name: ("sensor_msgs/msg/PointCloud2", "stream"),
+        WING_COEFFICIENTS.name: ("geometry_msgs/msg/Vector3Stamped", "stream"),
+        EXPERIMENT_SEGMENT.name: ("std_msgs/msg/String", "events"),
+        IDENTIFICATION_MODEL.name: ("std_msgs/msg/String", "latched"),
+        IDENTIFICATION_STATUS.name: ("diagnostic_msgs/msg/DiagnosticArray", "latched"),
     }
     node = Node("test_view_publisher", argv=[], backend="dds")
     try:
         pubs = {t: node.create_publisher(ty, t, qos) for t, (ty, qos) in topics.items()}
         # Published before the view exists: the latched model must still reach it.
-        model = next(m for _, t, m in messages() if t == "/identification/model")
-        pubs["/identification/model"].publish(model)
+        model = next(m for _, t, m in messages() if t == IDENTIFICATION_MODEL.name)
+        pubs[IDENTIFICATION_MODEL.name].publish(model)
         with Processes(env, log_dir=tmp_path) as procs:
             view = procs.start_python(
                 "-m aero_rig.view",
@@ -399,7 +409,7 @@ def test_view_node_records_what_it_receives_over_dds(
                 lambda: all(p.subscription_count() > 0 for p in pubs.values()), 20
             )
             assert matched, procs.log("view")
-            streamed = [(t, m) for _, t, m in messages() if t not in ("/identification/model",)]
+            streamed = [(t, m) for _, t, m in messages() if t not in (IDENTIFICATION_MODEL.name,)]
             for i, (topic, msg) in enumerate(streamed):
                 pubs[topic].publish(msg)
                 if i % 20 == 19:

@@ -1,6 +1,7 @@
 """Excitation design (odd random-phase multisines, sines, experiment plans) and the pitch
 command generator node."""
 
+from multisine_gen.campaigns import build_plan, default_plan, short_plan
 from multisine_gen.crest import crest_factor, reduce_crest_factor
 from multisine_gen.multisine import (
     ExcitationError,
@@ -19,9 +20,6 @@ from multisine_gen.plan import (
     PlanSample,
     Segment,
     SineTest,
-    build_plan,
-    default_plan,
-    short_plan,
 )
 from multisine_gen.sine import Sine, design_sine
 

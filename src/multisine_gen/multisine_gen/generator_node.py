@@ -1,4 +1,4 @@
-"""Generator node: streams the experiment plan as pitch commands (DESIGN.md §4-§5).
+"""Generator node: streams the experiment plan as pitch commands (docs/design.md §4-§5).
 
 Publishes ``/pitch/command`` (sensor_msgs/JointState, joint ``pitch``, position in rad) sample by
 sample with stamps t0 + k/fs, the whole plan as JSON on ``/experiment/plan`` (latched) and a JSON
@@ -26,12 +26,20 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rig_runtime.barrier import READY_TOPIC, READY_TYPE, ReadinessReport, StartBarrier
-
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+from rig_runtime.barrier import ReadinessReport, StartBarrier
+from rig_runtime.interface import (
+    EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
+    GRAPH_READY,
+    PITCH_COMMAND,
+    PITCH_JOINT,
+    WING_COEFFICIENTS,
+)
 
+from .campaigns import default_plan, short_plan
 from .pacing import StreamPacer
-from .plan import ExperimentPlan, PlanLimits, default_plan, short_plan
+from .plan import ExperimentPlan, PlanLimits
 
 PARAMETERS = [
     Parameter("plan", "short", "experiment plan: 'default', 'short' or a plan JSON file"),
@@ -93,10 +101,14 @@ class Generator:
         self.starts = {s.start_k: s for s in self.plan.segments}
         self.ends = {s.stop_k - 1: s for s in self.plan.segments}
         self.cmd_pub = node.create_publisher(
-            "sensor_msgs/msg/JointState", "/pitch/command", "stream"
+            PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )
-        self.plan_pub = node.create_publisher("std_msgs/msg/String", "/experiment/plan", "latched")
-        self.seg_pub = node.create_publisher("std_msgs/msg/String", "/experiment/segment", "events")
+        self.plan_pub = node.create_publisher(
+            EXPERIMENT_PLAN.type, EXPERIMENT_PLAN.name, EXPERIMENT_PLAN.qos
+        )
+        self.seg_pub = node.create_publisher(
+            EXPERIMENT_SEGMENT.type, EXPERIMENT_SEGMENT.name, EXPERIMENT_SEGMENT.qos
+        )
         self.k = 0
         self.t0_ns: int | None = None
         self.finished = False
@@ -113,13 +125,15 @@ class Generator:
         self.barrier_logged = time.monotonic()
         if p["flow_control"]:
             node.create_subscription(
-                "geometry_msgs/msg/Vector3Stamped",
-                "/wing/coefficients",
+                WING_COEFFICIENTS.type,
+                WING_COEFFICIENTS.name,
                 self.on_coefficients,
-                "stream",
+                WING_COEFFICIENTS.qos,
                 required=True,
             )
-        node.create_subscription(READY_TYPE, READY_TOPIC, self.on_ready, "latched", depth=256)
+        node.create_subscription(
+            GRAPH_READY.type, GRAPH_READY.name, self.on_ready, GRAPH_READY.qos, depth=256
+        )
         node.create_timer(0.002, self.tick)
         node.logger.info(
             "plan %s: %d samples (%.1f s at %g Hz), %d segments",
@@ -147,7 +161,9 @@ class Generator:
         return self.t0_ns + round(k * 1e9 / self.fs)
 
     def _event(self, payload: dict[str, Any]) -> None:
-        self.seg_pub.publish(self.node.new_message("std_msgs/msg/String", data=json.dumps(payload)))
+        self.seg_pub.publish(
+            self.node.new_message(EXPERIMENT_SEGMENT.type, data=json.dumps(payload))
+        )
 
     def pending(self) -> list[str]:
         """What the start still waits for (empty: every member ready and matched)."""
@@ -184,9 +200,7 @@ class Generator:
         self.pacer.start(time.monotonic())
         payload = json.loads(self.plan.to_json())
         payload["t0_ns"] = self.t0_ns
-        self.plan_pub.publish(
-            self.node.new_message("std_msgs/msg/String", data=json.dumps(payload))
-        )
+        self.plan_pub.publish(self.node.new_message(EXPERIMENT_PLAN.type, data=json.dumps(payload)))
         self.node.logger.info(
             "start barrier passed after %.2f s (%d nodes ready and matched); t0 = %d ns; streaming",
             now - self.created,
@@ -209,7 +223,9 @@ class Generator:
             if segment is not None:
                 self._event(segment.event("start", t0_s, self.fs) | {"t0_ns": self.t0_ns})
             msg = self.node.new_message(
-                "sensor_msgs/msg/JointState", name=["pitch"], position=[self.command_deg[k] * DEG]
+                PITCH_COMMAND.type,
+                name=[PITCH_JOINT],
+                position=[self.command_deg[k] * DEG],
             )
             set_stamp(msg.header.stamp, self.stamp_ns(k))
             self.cmd_pub.publish(msg)

@@ -1,6 +1,6 @@
 """How far the generator may stream: wall-clock pacing and the simulation's credit window.
 
-Two limits, either or both (DESIGN.md §5):
+Two limits, either or both (docs/design.md §5):
 
 - **Wall clock**: at ``real_time_factor`` r > 0, sample k is due once ``k / (r·fs)`` wall seconds
   have passed since t0 (the rig runs at r = 1).

@@ -1,6 +1,6 @@
-"""The experiment plan: the campaign of the paper as one stream of pitch commands.
+"""The experiment plan model and its validation: a campaign as one stream of pitch commands.
 
-A plan is the single source of truth for an experiment (DESIGN.md §4, `/experiment/plan`): the
+A plan is the single source of truth for an experiment (docs/design.md §4, `/experiment/plan`): the
 generator renders it sample by sample (command k is stamped t0 + k/fs), the identifier cuts
 periods with its segment records, and its JSON lets any subscriber rebuild every sample exactly.
 
@@ -16,10 +16,12 @@ Structure (paper §3.2):
 
 A ramp into a periodic block ends at the last sample of that block's period, so the block's
 first sample follows as it would in the periodic steady state (no step at the joint).
+
+The plan's JSON wire format is in plan_format.py; the campaign presets (build_plan,
+default_plan, short_plan) are in campaigns.py.
 """
 
 import bisect
-import json
 import math
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, fields
@@ -27,14 +29,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from multisine_gen.crest import reduce_crest_factor
-from multisine_gen.multisine import (
-    ExcitationError,
-    Multisine,
-    design_line_grid,
-    random_phase_multisine,
-)
-from multisine_gen.sine import Sine, design_sine
+from multisine_gen.multisine import ExcitationError, Multisine
+from multisine_gen.sine import Sine
 
 __all__ = [
     "BaselineSweep",
@@ -46,14 +42,9 @@ __all__ = [
     "Segment",
     "SegmentKind",
     "SineTest",
-    "build_plan",
-    "default_plan",
-    "short_plan",
 ]
 
 SegmentKind = Literal["ramp", "baseline", "settle", "multisine", "sine"]
-PLAN_FORMAT = "multisine_gen/experiment_plan"
-PLAN_VERSION = 1
 
 
 class PlanError(ExcitationError):
@@ -535,315 +526,27 @@ class ExperimentPlan:
             raise PlanError(f"plan refused: {problems[0]}{more}", problems)
 
     # -- JSON (the /experiment/plan payload) ----------------------------------------------------
+    # The wire format lives in plan_format.py; these methods delegate to it.
     def to_dict(self) -> dict[str, Any]:
-        realizations = [ms for lv in self.levels for ms in lv.realizations]
-        shared = bool(realizations) and all(
-            ms.N == realizations[0].N
-            and np.array_equal(ms.excited_lines, realizations[0].excited_lines)
-            and np.array_equal(ms.detection_lines, realizations[0].detection_lines)
-            for ms in realizations
-        )
-        return {
-            "format": PLAN_FORMAT,
-            "version": PLAN_VERSION,
-            "fs": self.fs,
-            "N": realizations[0].N if shared else None,
-            "excited_lines": realizations[0].excited_lines.tolist() if shared else None,
-            "detection_lines": realizations[0].detection_lines.tolist() if shared else None,
-            "seed": self.seed,
-            "rest_deg": self.rest_deg,
-            "ramp_rate_deg_s": self.ramp_rate_deg_s,
-            "limits": asdict(self.limits),
-            "baseline": asdict(self.baseline) if self.baseline is not None else None,
-            "levels": [
-                {
-                    "level": lv.level,
-                    "offset_deg": lv.offset_deg,
-                    "std_deg": lv.std_deg,
-                    "periods": lv.periods,
-                    "settle_periods": lv.settle_periods,
-                    "realizations": [_multisine_to_dict(ms) for ms in lv.realizations],
-                }
-                for lv in self.levels
-            ],
-            "sines": [
-                {
-                    "level": t.level,
-                    "frequency_hz": t.sine.frequency_hz,
-                    "requested_frequency_hz": t.sine.requested_frequency_hz,
-                    "samples_per_period": t.sine.samples_per_period,
-                    "amplitude_deg": t.sine.amplitude_deg,
-                    "offset_deg": t.sine.offset_deg,
-                    "periods": t.periods,
-                    "settle_periods": t.settle_periods,
-                }
-                for t in self.sines
-            ],
-            "total_samples": self.total_samples,
-            "duration_s": self.duration_s,
-            "segments": [s.to_dict() for s in self.segments],
-        }
+        from multisine_gen.plan_format import plan_to_dict
+
+        return plan_to_dict(self)
 
     def to_json(self, indent: int | None = None) -> str:
         """The plan as JSON (floats written with round-trip precision)."""
-        return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+        from multisine_gen.plan_format import plan_to_json
+
+        return plan_to_json(self, indent)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "ExperimentPlan":
-        if data.get("format") != PLAN_FORMAT or data.get("version") != PLAN_VERSION:
-            raise PlanError(
-                f"not an experiment plan of format {PLAN_FORMAT!r} version {PLAN_VERSION}: got "
-                f"format {data.get('format')!r} version {data.get('version')!r}"
-            )
-        try:
-            fs = float(data["fs"])
-            levels = tuple(
-                MultisineLevel(
-                    level=int(lv["level"]),
-                    realizations=tuple(_multisine_from_dict(ms) for ms in lv["realizations"]),
-                    periods=int(lv["periods"]),
-                    settle_periods=int(lv["settle_periods"]),
-                )
-                for lv in data["levels"]
-            )
-            sines = tuple(
-                SineTest(
-                    level=int(t["level"]),
-                    sine=Sine(
-                        fs=fs,
-                        samples_per_period=int(t["samples_per_period"]),
-                        amplitude_deg=float(t["amplitude_deg"]),
-                        offset_deg=float(t["offset_deg"]),
-                        requested_frequency_hz=t["requested_frequency_hz"],
-                    ),
-                    periods=int(t["periods"]),
-                    settle_periods=int(t["settle_periods"]),
-                )
-                for t in data["sines"]
-            )
-            baseline = BaselineSweep(**data["baseline"]) if data["baseline"] else None
-            plan = cls(
-                fs=fs,
-                rest_deg=float(data["rest_deg"]),
-                ramp_rate_deg_s=float(data["ramp_rate_deg_s"]),
-                baseline=baseline,
-                levels=levels,
-                sines=sines,
-                seed=data["seed"],
-                limits=PlanLimits(**data["limits"]),
-            )
-        except PlanError:
-            raise
-        except (KeyError, TypeError, ValueError) as error:
-            raise PlanError(
-                f"experiment plan JSON is missing or mistypes a field: {error}"
-            ) from error
-        stored = [Segment.from_dict(s) for s in data.get("segments", [])]
-        if not _same_segments(stored, plan.segments):
-            raise PlanError(
-                "experiment plan JSON: its segments disagree with the segments its excitations "
-                "produce (edited by hand, or written by another version); regenerate the plan"
-            )
-        return plan
+        from multisine_gen.plan_format import plan_from_dict
+
+        return plan_from_dict(data, cls)
 
     @classmethod
     def from_json(cls, text: str) -> "ExperimentPlan":
         """Rebuild a plan from `to_json()` output; every sample comes out identical."""
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as error:
-            raise PlanError(f"experiment plan is not valid JSON: {error}") from error
-        if not isinstance(data, dict):
-            raise PlanError("experiment plan JSON must be an object")
-        return cls.from_dict(data)
+        from multisine_gen.plan_format import plan_from_json
 
-
-def _same_segments(a: list[Segment], b: tuple[Segment, ...]) -> bool:
-    """Equal records; floats to 1e-9 relative, since another machine's FFT may round the last
-    bit of a period sample (a ramp's end) differently."""
-    if len(a) != len(b):
-        return False
-    for x, y in zip(a, b, strict=True):
-        for f in fields(Segment):
-            u, v = getattr(x, f.name), getattr(y, f.name)
-            if isinstance(u, float) and isinstance(v, float):
-                if not math.isclose(u, v, rel_tol=1e-9, abs_tol=1e-12):
-                    return False
-            elif u != v:
-                return False
-    return True
-
-
-def _multisine_to_dict(ms: Multisine) -> dict[str, Any]:
-    return {
-        "fs": ms.fs,
-        "N": ms.N,
-        "kind": ms.kind,
-        "excited_lines": ms.excited_lines.tolist(),
-        "detection_lines": ms.detection_lines.tolist(),
-        "amplitudes": ms.amplitudes.tolist(),
-        "phases": ms.phases.tolist(),
-        "offset_deg": ms.offset_deg,
-        "std_deg": ms.std_deg,
-        "seed": ms.seed,
-    }
-
-
-def _multisine_from_dict(d: dict[str, Any]) -> Multisine:
-    return Multisine(
-        fs=float(d["fs"]),
-        N=int(d["N"]),
-        excited_lines=np.array(d["excited_lines"], dtype=np.int64),
-        detection_lines=np.array(d["detection_lines"], dtype=np.int64),
-        amplitudes=np.array(d["amplitudes"], dtype=float),
-        phases=np.array(d["phases"], dtype=float),
-        offset_deg=float(d["offset_deg"]),
-        std_deg=float(d["std_deg"]),
-        seed=d["seed"],
-        kind=d["kind"],
-    )
-
-
-def _derived_seed(seed: int, *key: int) -> int:
-    """A 32-bit seed for one random part, stable when other parts are added or removed."""
-    return int(np.random.SeedSequence(seed, spawn_key=key).generate_state(1)[0])
-
-
-def build_plan(
-    *,
-    fs: float = 200.0,
-    N: int = 10_000,
-    f_min_hz: float = 0.02,
-    f_max_hz: float = 1.98,
-    group_size: int = 4,
-    offsets_deg: tuple[float, ...] = (6.6, 15.7, 19.9),
-    std_deg: float = 2.4,
-    realizations: int = 2,
-    periods: int = 6,
-    settle_periods: int = 1,
-    crest_factor_reduction: bool = False,
-    sine_frequencies_hz: tuple[float, ...] = (0.4, 1.0, 1.6),
-    sine_amplitude_deg: float = 4.7,
-    sine_offsets_deg: tuple[float, ...] = (5.9, 15.1, 19.3),
-    sine_min_periods: int = 10,
-    sine_min_duration_s: float = 20.0,
-    sine_settle_s: float = 2.0,
-    baseline: BaselineSweep | None = None,
-    rest_deg: float = 0.0,
-    ramp_rate_deg_s: float = 5.0,
-    seed: int | None = 0,
-    limits: PlanLimits | None = None,
-) -> ExperimentPlan:
-    """Design a campaign: multisine levels at `offsets_deg` (level i), M = `realizations` odd
-    random-phase realizations each on one shared line grid, and sines at `sine_offsets_deg[i]`
-    (level i) for every frequency, each with max(sine_min_periods, ⌈sine_min_duration_s·f⌉)
-    measured periods after ⌈sine_settle_s·f⌉ (≥ 1) settling periods.
-
-    seed: int for a reproducible plan; None draws fresh entropy (recorded in plan.seed).
-    Design errors come back as PlanError naming the level / sine concerned.
-    """
-    entropy = np.random.SeedSequence(seed).entropy
-    assert isinstance(entropy, int)
-    try:
-        grid = design_line_grid(
-            fs, N, f_min_hz, f_max_hz, "odd_random", group_size, _derived_seed(entropy, 0)
-        )
-    except ExcitationError as error:
-        raise PlanError(f"multisine levels: {error}") from error
-    levels = []
-    for i, offset in enumerate(offsets_deg):
-        realization_list = []
-        for m in range(realizations):
-            try:
-                ms = random_phase_multisine(grid, std_deg, offset, _derived_seed(entropy, 1, i, m))
-                if crest_factor_reduction:
-                    ms = reduce_crest_factor(ms)
-            except ExcitationError as error:
-                raise PlanError(
-                    f"multisine level {i} (offset {offset:g}°), realization {m}: {error}"
-                ) from error
-            realization_list.append(ms)
-        levels.append(
-            MultisineLevel(
-                i, tuple(realization_list), periods=periods, settle_periods=settle_periods
-            )
-        )
-    sines = []
-    for i, offset in enumerate(sine_offsets_deg):
-        for f in sine_frequencies_hz:
-            try:
-                sine = design_sine(fs, f, sine_amplitude_deg, offset)
-            except ExcitationError as error:
-                raise PlanError(
-                    f"sine level {i} (offset {offset:g}°), {f:g} Hz: {error}"
-                ) from error
-            f_fit = sine.frequency_hz
-            n_periods = max(sine_min_periods, math.ceil(sine_min_duration_s * f_fit - 1e-9))
-            n_settle = max(1, math.ceil(sine_settle_s * f_fit - 1e-9))
-            sines.append(SineTest(i, sine, periods=n_periods, settle_periods=n_settle))
-    return ExperimentPlan(
-        fs=float(fs),
-        rest_deg=float(rest_deg),
-        ramp_rate_deg_s=float(ramp_rate_deg_s),
-        baseline=baseline,
-        levels=tuple(levels),
-        sines=tuple(sines),
-        seed=entropy,
-        limits=limits if limits is not None else PlanLimits(),
-    )
-
-
-def default_plan(
-    seed: int | None = 0,
-    *,
-    include_baseline: bool = True,
-    crest_factor_reduction: bool = False,
-    limits: PlanLimits | None = None,
-) -> ExperimentPlan:
-    """The paper's campaign (§3.2): baseline sweep 0.52 °/s up to 30° and back; odd
-    random-phase multisines 0.02–1.98 Hz, fs 200 Hz, N 10,000 (50 s periods), 2.4° std at
-    offsets 6.6°, 15.7°, 19.9°, M = 2 realizations × (1 settling + P = 6) periods; sines 0.4,
-    1.0, 1.6 Hz of 4.7° at 5.9°, 15.1°, 19.3° (≥ 10 periods and ≥ 20 s, after ≥ 2 s settling);
-    ramps at 5 °/s from and back to rest at 0°. About 41 minutes."""
-    return build_plan(
-        baseline=BaselineSweep(peak_deg=30.0, rate_deg_s=0.52) if include_baseline else None,
-        crest_factor_reduction=crest_factor_reduction,
-        seed=seed,
-        limits=limits,
-    )
-
-
-def short_plan(
-    seed: int | None = 0,
-    *,
-    crest_factor_reduction: bool = False,
-    limits: PlanLimits | None = None,
-) -> ExperimentPlan:
-    """The default plan's structure, small enough for tests: N = 2,000 (10 s periods, 0.1 Hz
-    resolution), band 0.1–1.98 Hz, levels 6.6° and 19.9° (2.4° std), M = 2 realizations × (1
-    settling + P = 4) periods; sines at 1.0 and 1.6 Hz of 4.7° at 5.9° and 19.3°, 5 periods
-    after 1 settling period; no baseline; ramps at 10 °/s. About 3.8 minutes of experiment.
-
-    P = 4 rather than 3: at the high level a period deviates from the period mean by ≈ 40-50% of
-    the output's standard deviation (stochastic stall), and a PNLSS model trained on the mean of
-    3 periods now and then fits that variation instead of the dynamics (simulated plant, 14
-    seeds: the worst PNLSS model error on long 19.3° sine records fell from > 7 to 0.45)."""
-    return build_plan(
-        N=2_000,
-        f_min_hz=0.1,
-        f_max_hz=1.98,
-        offsets_deg=(6.6, 19.9),
-        realizations=2,
-        periods=4,
-        settle_periods=1,
-        crest_factor_reduction=crest_factor_reduction,
-        sine_frequencies_hz=(1.0, 1.6),
-        sine_offsets_deg=(5.9, 19.3),
-        sine_min_periods=5,
-        sine_min_duration_s=0.0,
-        sine_settle_s=0.0,
-        baseline=None,
-        ramp_rate_deg_s=10.0,
-        seed=seed,
-        limits=limits,
-    )
+        return plan_from_json(text, cls)

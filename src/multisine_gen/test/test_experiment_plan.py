@@ -5,14 +5,9 @@ import json
 
 import numpy as np
 import pytest
-from multisine_gen.plan import (
-    ExperimentPlan,
-    PlanError,
-    PlanLimits,
-    build_plan,
-    default_plan,
-    short_plan,
-)
+
+from multisine_gen.campaigns import build_plan, default_plan, short_plan
+from multisine_gen.plan import ExperimentPlan, PlanError, PlanLimits
 
 
 @pytest.fixture(scope="module")

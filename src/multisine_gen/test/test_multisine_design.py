@@ -3,6 +3,7 @@ realizations that differ only in phases, seeded reproducibility, clear errors.""
 
 import numpy as np
 import pytest
+
 from multisine_gen.multisine import (
     ExcitationError,
     Multisine,

@@ -9,9 +9,9 @@ import math
 from dataclasses import fields
 from typing import Any
 
-from rig_runtime.diagnostics import diagnostic_array
-
 from rig_runtime import Node, Parameter
+from rig_runtime.diagnostics import diagnostic_array
+from rig_runtime.interface import DIAGNOSTICS, PITCH_JOINT, joint_position
 
 from .safety import ActuatorLimits, GovernorEvent, SafetyGovernor
 
@@ -41,16 +41,9 @@ def limits_from_params(params: Any) -> ActuatorLimits:
 
 
 def command_position(msg: Any) -> float:
-    """The ``pitch`` joint's position of a JointState command (NaN if absent)."""
-    names = list(msg.name)
-    positions = msg.position
-    if "pitch" in names:
-        index = names.index("pitch")
-    elif not names and len(positions) == 1:
-        index = 0
-    else:
-        return math.nan
-    return float(positions[index]) if index < len(positions) else math.nan
+    """The ``pitch`` joint's position of a JointState command, NaN (refused) if it has none."""
+    position = joint_position(msg, PITCH_JOINT)
+    return math.nan if position is None else position
 
 
 TRACKING_TOLERANCE_DEG = 1e-6
@@ -112,7 +105,7 @@ class SafetyReporter:
         self.node = node
         self.governor = governor
         self.hardware_id = hardware_id
-        self.pub = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics")
+        self.pub = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name)
         self.extra: dict[str, str] = {}
         self._last_publish = 0.0
         self._pending = False

@@ -1,4 +1,4 @@
-"""Simulated pitch actuator (DESIGN.md §6).
+"""Simulated pitch actuator (docs/design.md §6).
 
 Closed position loop as a delayed, rate-limited second-order system
 
@@ -16,7 +16,7 @@ moves faster than the limit. Below the rate limit the model is linear, and
 `ActuatorModel.frf` is its exact sampled frequency response (with ZOH and delay): a simulated
 sine matches it to numerical precision, and it equals the continuous model's response.
 
-Time convention (reactive plant, DESIGN.md §5): `step(command k)` holds command k over
+Time convention (reactive plant, docs/design.md §5): `step(command k)` holds command k over
 [t_k, t_k + 1/fs) and returns the state at the end of that interval as sample k, which keeps
 command k's stamp. The logged pitch is the true pitch plus white noise, quantised to the encoder
 step. `alpha_true_rad` adds the free-stream gust (gust.py), which the wing sees but the encoder
@@ -110,7 +110,7 @@ class ActuatorModel:
     """Simulated actuator stepped once per command sample.
 
     Args:
-        params: model parameters (defaults of DESIGN.md §6 when None).
+        params: model parameters (defaults of docs/design.md §6 when None).
         fs: command/sample rate in Hz.
         seed: seeds the encoder noise and the gust (independent streams).
     """

@@ -1,4 +1,4 @@
-"""Free-stream gust on the angle of attack: an Ornstein–Uhlenbeck process (DESIGN.md §6).
+"""Free-stream gust on the angle of attack: an Ornstein–Uhlenbeck process (docs/design.md §6).
 
 dα_g = −α_g/τ dt + σ √(2/τ) dW has variance σ² and autocorrelation e^{−|lag|/τ}. Sampled at
 dt it is exactly the AR(1) recursion (Gillespie, Phys. Rev. E 54, 2084, 1996)

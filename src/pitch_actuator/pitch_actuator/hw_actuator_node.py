@@ -19,6 +19,7 @@ import time
 from typing import Any
 
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+from rig_runtime.interface import PITCH_COMMAND, PITCH_JOINT, PITCH_STATE, PITCH_STOP
 
 from .actuator_common import (
     LIMIT_PARAMETERS,
@@ -73,14 +74,16 @@ class HwActuator:
         self.t_origin = time.monotonic()
         self.governor = SafetyGovernor(self.limits, initial_deg=p["initial_deg"], t_s=0.0)
         self.sent_setpoint_deg: float | None = None
-        self.state_pub = node.create_publisher(
-            "sensor_msgs/msg/JointState", "/pitch/state", p["state_qos"]
-        )
+        self.state_pub = node.create_publisher(PITCH_STATE.type, PITCH_STATE.name, p["state_qos"])
         self.reporter = SafetyReporter(
             node, self.governor, f"pwac://{p['controller_host']}:{p['controller_port']}"
         )
         node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream", required=True
+            PITCH_COMMAND.type,
+            PITCH_COMMAND.name,
+            self.on_command,
+            PITCH_COMMAND.qos,
+            required=True,
         )
         self.tracking = CommandTracking(node)
         self.trips = 0
@@ -89,7 +92,7 @@ class HwActuator:
             f"no feedback from the position controller at "
             f"{p['controller_host']}:{p['controller_port']} yet",
         )
-        node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
+        node.create_subscription(PITCH_STOP.type, PITCH_STOP.name, self.on_stop)
         node.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
         node.create_timer(p["diagnostics_period_s"], self.update_link_diagnostics)
         self.published = 0
@@ -134,8 +137,8 @@ class HwActuator:
 
     def publish_state(self, feedback: Feedback) -> None:
         msg = self.node.new_message(
-            "sensor_msgs/msg/JointState",
-            name=["pitch"],
+            PITCH_STATE.type,
+            name=[PITCH_JOINT],
             position=[feedback.position_rad],
             velocity=[feedback.velocity_rad_s],
         )

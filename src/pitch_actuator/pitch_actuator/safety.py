@@ -8,7 +8,7 @@ at wall-clock time on the rig and at made-up times in tests.
 Units: the governor works in **degrees** (like the parameter files and `ActuatorLimits`);
 `command_rad` / `setpoint_rad` are the radian doors for nodes that speak SI on the wire.
 
-Guarantees (DESIGN.md §8):
+Guarantees (docs/design.md §8):
 
 - the setpoint never leaves [min_deg, max_deg];
 - between two calls at t₁ < t₂ the setpoint changes by at most
@@ -476,7 +476,7 @@ class SafetyGovernor:
         setpoint = _move_toward(start_setpoint, setpoint, max_step)
         # Approach a limit exponentially (time constant limit_approach_s): a rate-limited ramp
         # that stops dead at the limit makes an underdamped position loop overshoot it
-        # (ζ = 0.7: ~0.15° at 150°/s); an exponential approach does not (DESIGN.md §8).
+        # (ζ = 0.7: ~0.15° at 150°/s); an exponential approach does not (docs/design.md §8).
         if lim.limit_approach_s > 0 and elapsed > 0:
             keep = math.exp(-elapsed / lim.limit_approach_s)
             if setpoint > start_setpoint:

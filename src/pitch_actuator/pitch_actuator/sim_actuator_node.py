@@ -1,4 +1,4 @@
-"""Simulated actuator node (DESIGN.md §5-§6): the position loop of dynamics.py behind the
+"""Simulated actuator node (docs/design.md §5-§6): the position loop of dynamics.py behind the
 shared safety layer.
 
 Reactive: every ``/pitch/command`` sample k yields one ``/pitch/state`` sample k with the same
@@ -26,6 +26,14 @@ import time
 from typing import Any
 
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+from rig_runtime.interface import (
+    ALPHA_TRUE_JOINT,
+    EXPERIMENT_SEGMENT,
+    PITCH_COMMAND,
+    PITCH_JOINT,
+    PITCH_STATE,
+    PITCH_STOP,
+)
 
 from .actuator_common import (
     LIMIT_PARAMETERS,
@@ -85,18 +93,23 @@ class SimActuator:
             seed=p["seed"],
         )
         self.governor = SafetyGovernor(self.limits, initial_deg=p["initial_deg"], t_s=0.0)
-        self.state_pub = node.create_publisher(
-            "sensor_msgs/msg/JointState", "/pitch/state", p["state_qos"]
-        )
+        self.state_pub = node.create_publisher(PITCH_STATE.type, PITCH_STATE.name, p["state_qos"])
         self.reporter = SafetyReporter(node, self.governor, "sim_actuator")
         self.command_sub = node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/command", self.on_command, "stream", required=True
+            PITCH_COMMAND.type,
+            PITCH_COMMAND.name,
+            self.on_command,
+            PITCH_COMMAND.qos,
+            required=True,
         )
-        node.create_subscription("std_msgs/msg/Bool", "/pitch/stop", self.on_stop)
+        node.create_subscription(PITCH_STOP.type, PITCH_STOP.name, self.on_stop)
         # After the plan's end the generator may leave: running on is then the expected end of
         # the run, not an anomaly of the experiment.
         node.create_subscription(
-            "std_msgs/msg/String", "/experiment/segment", self.on_segment, "events"
+            EXPERIMENT_SEGMENT.type,
+            EXPERIMENT_SEGMENT.name,
+            self.on_segment,
+            EXPERIMENT_SEGMENT.qos,
         )
         self.plan_ended = False
         self.t_origin_ns: int | None = None
@@ -117,8 +130,8 @@ class SimActuator:
     def _step_and_publish(self, setpoint_rad: float, stamp_ns: int) -> None:
         sample = self.model.step(setpoint_rad)
         msg = self.node.new_message(
-            "sensor_msgs/msg/JointState",
-            name=["pitch", "alpha_true"],
+            PITCH_STATE.type,
+            name=[PITCH_JOINT, ALPHA_TRUE_JOINT],
             position=[sample.position_rad, sample.alpha_true_rad],
             velocity=[sample.velocity_rad_s, sample.velocity_rad_s],
         )

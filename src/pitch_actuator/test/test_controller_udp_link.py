@@ -20,6 +20,7 @@ from controller_udp_support import (
     stop_process,
     wait_until,
 )
+
 from pitch_actuator.controller_link import ControllerLink, ControllerLinkConfig
 from pitch_actuator.controller_protocol import (
     SEQ_MODULUS,

@@ -4,6 +4,7 @@ import math
 import struct
 
 import pytest
+
 from pitch_actuator.controller_protocol import (
     FEEDBACK_SIZE,
     HEARTBEAT_SIZE,

@@ -1,11 +1,12 @@
 """Simulated actuator: sampled sine responses match `frf` (and the continuous model of
-DESIGN.md §6), the rate limit holds, the logged pitch has the specified noise and encoder
+docs/design.md §6), the rate limit holds, the logged pitch has the specified noise and encoder
 step, and a seed reproduces a run."""
 
 import math
 
 import numpy as np
 import pytest
+
 from pitch_actuator.dynamics import ActuatorModel, ActuatorParams
 
 FS = 200.0
@@ -48,7 +49,7 @@ def test_logged_pitch_sine_matches_frf_within_noise(freq_hz: float) -> None:
 
 
 def test_frf_equals_the_continuous_model_with_zoh() -> None:
-    """DESIGN.md §6 model, sampled: G(jω) e^{-jωτ_d} · ZOH (sinc · e^{-jωT/2}) · e^{jωT}
+    """docs/design.md §6 model, sampled: G(jω) e^{-jωτ_d} · ZOH (sinc · e^{-jωT/2}) · e^{jωT}
     (sample k is the state at the end of interval k). Aliased ZOH images are neglected, so the
     agreement is to 1e-3 in gain and 0.05° in phase below 10 Hz."""
     model = ActuatorModel(fs=FS)

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from pitch_actuator.gust import FreeStreamGust
 
 FS = 200.0

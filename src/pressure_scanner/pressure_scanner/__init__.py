@@ -1,2 +1,2 @@
-"""Simulated dynamic-stall wing with 49 pressure taps, Scanivalve-style UDP scanner driver,
-lift by pressure integration."""
+"""Scanivalve-style UDP pressure-scanner driver and lift by pressure integration over the
+wing's 49 pressure taps."""

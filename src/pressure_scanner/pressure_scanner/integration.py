@@ -1,4 +1,4 @@
-"""Lift, pressure drag and quarter-chord moment by integrating tap pressures (DESIGN.md §6).
+"""Lift, pressure drag and quarter-chord moment by integrating tap pressures (docs/design.md §6).
 
 The taps are joined into one closed contour — trailing edge → lower surface → leading-edge tap →
 upper surface → trailing edge — and the pressure coefficient is integrated with the trapezoidal

@@ -1,4 +1,4 @@
-"""Lift node: tap pressures to force coefficients by pressure integration (DESIGN.md §6).
+"""Lift node: tap pressures to force coefficients by pressure integration (docs/design.md §6).
 
 Subscribes ``/pressure/taps`` and ``/pitch/state`` (measured pitch = geometric angle of attack)
 and publishes ``/wing/coefficients`` (geometry_msgs/Vector3Stamped: x = C_l, y = C_d (pressure),
@@ -15,20 +15,28 @@ import sys
 from typing import Any
 
 import numpy as np
-from rig_runtime.diagnostics import diagnostic_array
 
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
+from rig_runtime.diagnostics import diagnostic_array
+from rig_runtime.interface import (
+    DIAGNOSTICS,
+    PITCH_JOINT,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    WING_COEFFICIENTS,
+    joint_position,
+)
 
 from .integration import DEFAULT_SCANNER_RANGE_PA, PressureIntegrator
 from .pitch_alignment import PitchAlignment
+from .rig_geometry import RigGeometry
 from .tap_cloud import read_cloud
 from .taps import load_taps
-from .wing_params import WingParams
 
 PARAMETERS = [
     Parameter(
         "dynamic_pressure_pa",
-        WingParams().dynamic_pressure_pa,
+        RigGeometry().dynamic_pressure_pa,
         "free-stream dynamic pressure q = ½ρU² [Pa] (rig: from the Pitot tube)",
         min=1.0,
     ),
@@ -69,24 +77,22 @@ class Lift:
         self.counts = {"published": 0, "invalid": 0, "alpha_missing": 0}
         self.excluded_per_tap = np.zeros(self.n_taps, dtype=np.int64)
         self.last_reason = ""
-        self.pub = node.create_publisher(
-            "geometry_msgs/msg/Vector3Stamped", "/wing/coefficients", p["qos"]
-        )
-        self.diag = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics")
+        self.pub = node.create_publisher(WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, p["qos"])
+        self.diag = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name)
         node.create_subscription(
-            "sensor_msgs/msg/JointState", "/pitch/state", self.on_pitch, p["qos"], required=True
+            PITCH_STATE.type, PITCH_STATE.name, self.on_pitch, p["qos"], required=True
         )
         node.create_subscription(
-            "sensor_msgs/msg/PointCloud2", "/pressure/taps", self.on_taps, p["qos"], required=True
+            PRESSURE_TAPS.type, PRESSURE_TAPS.name, self.on_taps, p["qos"], required=True
         )
         node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
 
     def on_pitch(self, msg: Any) -> None:
-        names = list(msg.name)
-        i = names.index("pitch") if "pitch" in names else 0
-        if i >= len(msg.position):
-            return
-        released = self.alignment.add_pitch(stamp_to_ns(msg.header.stamp), msg.position[i])
+        # A state without a finite pitch still takes its stamp: the taps at that stamp are
+        # counted as alpha_missing, not aligned to a neighbouring state.
+        pitch = joint_position(msg, PITCH_JOINT)
+        stamp = stamp_to_ns(msg.header.stamp)
+        released = self.alignment.add_pitch(stamp, math.nan if pitch is None else pitch)
         for stamp, taps, alpha in released:
             self._process(stamp, taps, alpha)
 
@@ -115,7 +121,7 @@ class Lift:
             self.node.anomalies.clear("invalid_coefficients")
         else:
             self.node.anomalies.mark("invalid_coefficients", stamp, self.last_reason)
-        out = self.node.new_message("geometry_msgs/msg/Vector3Stamped")
+        out = self.node.new_message(WING_COEFFICIENTS.type)
         out.header.stamp = msg.header.stamp
         out.header.frame_id = "wing"
         out.vector.x, out.vector.y, out.vector.z = cl, cd, cm

@@ -1,4 +1,4 @@
-"""Pitch by stamp for the taps samples of the lift node (DESIGN.md §6), without ROS or DDS.
+"""Pitch by stamp for the taps samples of the lift node (docs/design.md §6), without ROS or DDS.
 
 The coefficients of a taps sample need the angle of attack at the taps' stamp, and the pitch
 arrives on its own topic, neither in step nor in a guaranteed order with the taps. This class

@@ -12,15 +12,15 @@ the next ``tare_frames`` frames becomes the per-channel offset.
 import sys
 from typing import Any
 
-from rig_runtime.diagnostics import diagnostic_array
-
 from rig_runtime import Node, Parameter, run_node, set_stamp
+from rig_runtime.diagnostics import diagnostic_array
+from rig_runtime.interface import DIAGNOSTICS, PRESSURE_TAPS, PRESSURE_TARE
 
+from .rig_geometry import RigGeometry
 from .scanner_client import ScannerClient, ScannerClientConfig, TapPressures
 from .scanner_protocol import ChannelMap
 from .tap_cloud import fill_cloud, point_fields
 from .taps import load_taps
-from .wing_params import WingParams
 
 PARAMETERS = [
     Parameter("bind_host", "0.0.0.0", "interface the scanner streams to"),
@@ -45,7 +45,7 @@ class Scanner:
         p = node.params
         self.node = node
         taps = load_taps(p["taps_file"] or None)
-        params = WingParams()
+        params = RigGeometry()
         self.tap_xyz = taps.xyz_m(params.chord_m, params.span_m)
         channel_map = ChannelMap(tuple(p["channel_to_tap"]), n_taps=taps.n_taps)
         self.client = ScannerClient(
@@ -58,11 +58,9 @@ class Scanner:
             )
         )
         self.fields = point_fields(node.new_message)
-        self.pub = node.create_publisher(
-            "sensor_msgs/msg/PointCloud2", "/pressure/taps", p["taps_qos"]
-        )
-        self.diag = node.create_publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics")
-        node.create_subscription("std_msgs/msg/Bool", "/pressure/tare", self.on_tare)
+        self.pub = node.create_publisher(PRESSURE_TAPS.type, PRESSURE_TAPS.name, p["taps_qos"])
+        self.diag = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name)
+        node.create_subscription(PRESSURE_TARE.type, PRESSURE_TARE.name, self.on_tare)
         node.create_timer(1.0 / p["poll_rate_hz"], self.on_timer)
         node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
         self.published = 0
@@ -110,7 +108,7 @@ class Scanner:
             )
 
     def publish(self, frame: TapPressures) -> None:
-        cloud = self.node.new_message("sensor_msgs/msg/PointCloud2")
+        cloud = self.node.new_message(PRESSURE_TAPS.type)
         set_stamp(cloud.header.stamp, frame.stamp_ns)
         cloud.header.frame_id = "wing"
         fill_cloud(cloud, self.node.new_message, self.tap_xyz, frame.pressures_pa, self.fields)

@@ -1,4 +1,4 @@
-"""Tap pressures <-> sensor_msgs/PointCloud2 (DESIGN.md §4 ``/pressure/taps``).
+"""Tap pressures <-> sensor_msgs/PointCloud2 (docs/design.md §4 ``/pressure/taps``).
 
 One point per tap, in tap order: x, y, z [m, wing frame: x along the chord from the leading
 edge, y spanwise, z normal, upper side positive] and pressure [Pa], all float32 (16 bytes per

@@ -3,6 +3,7 @@
 import math
 
 import pytest
+
 from pressure_scanner.pitch_alignment import PitchAlignment
 
 MS = 1_000_000  # ns

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from pressure_scanner.geometry import half_thickness
-from pressure_scanner.plant import WingPlant
 from pressure_scanner.taps import cosine_clustered_taps, load_taps
 
 
@@ -25,17 +25,6 @@ def test_shipped_layout_is_49_cosine_clustered_taps_on_the_naca0018() -> None:
     np.testing.assert_allclose(taps.z_c[taps.lower], -taps.z_c[taps.upper])
     generated = cosine_clustered_taps()
     np.testing.assert_allclose(taps.x_c, generated.x_c, atol=1e-6)
-
-
-def test_tap_positions_in_metres_in_the_wing_frame() -> None:
-    plant = WingPlant()
-    xyz = plant.tap_xyz
-    taps = plant.taps
-    assert xyz.shape == (49, 3)
-    np.testing.assert_allclose(xyz[:, 0], 0.300 * taps.x_c)
-    np.testing.assert_allclose(xyz[:, 1], 0.270)  # mid-span row of the 0.540 m semi-span
-    np.testing.assert_allclose(xyz[:, 2], 0.300 * taps.z_c)
-    assert xyz[taps.upper, 2].min() > 0 > xyz[taps.lower, 2].max()
 
 
 def _write(tmp_path: Path, body: str) -> Path:

@@ -6,6 +6,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+
 from pressure_scanner.scanner_client import ScannerClient, ScannerClientConfig, wait_frames
 from pressure_scanner.scanner_protocol import ChannelMap, ScannerFrame, Units, pack_frame
 

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from pressure_scanner.scanner_protocol import (
     PA_PER_UNIT,
     ChannelMap,

@@ -2,12 +2,27 @@
 
 One node API over two backends (rclpy on ROS machines, Cyclone DDS everywhere else, both
 speaking ROS 2's wire format), a graph launcher and a rosbag2 (MCAP) recorder.
+
+The names below load their module on first use (PEP 562), so that the light modules (the
+interface contract ``rig_runtime.interface``, the graph description ``rig_runtime.graph``,
+``rig_runtime.qos``) import without loading rosbags, Cyclone DDS or rclpy: the ROS launch
+files and the offline tools use them in processes that must not load a middleware.
 """
 
-from .messages import new_message, set_stamp, stamp_to_ns
-from .node import Node, run_node
-from .params import Parameter, ParameterError
-from .qos import PROFILES, QosProfile
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "PROFILES": "qos",
+    "QosProfile": "qos",
+    "Node": "node",
+    "run_node": "node",
+    "Parameter": "params",
+    "ParameterError": "params",
+    "new_message": "messages",
+    "set_stamp": "messages",
+    "stamp_to_ns": "messages",
+}
 
 __all__ = [
     "PROFILES",
@@ -20,3 +35,16 @@ __all__ = [
     "set_stamp",
     "stamp_to_ns",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'rig_runtime' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"rig_runtime.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -16,10 +16,6 @@ import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-ANOMALY_TOPIC = "/experiment/anomaly"
-ANOMALY_TYPE = "std_msgs/msg/String"
-ANOMALY_QOS = "events"
-
 
 @dataclass(frozen=True)
 class Anomaly:

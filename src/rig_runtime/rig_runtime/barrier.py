@@ -26,8 +26,7 @@ import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
-READY_TOPIC = "/graph/ready"
-READY_TYPE = "std_msgs/msg/String"
+from .interface import GRAPH_READY
 
 
 @dataclass(frozen=True)
@@ -171,7 +170,7 @@ def _link_problems(reports: Iterable[ReadinessReport]) -> list[str]:
     readers: dict[str, list[Endpoint]] = {}
     for report in reports:
         for e in report.endpoints:
-            if e.topic == READY_TOPIC:
+            if e.topic == GRAPH_READY.name:
                 continue  # the barrier's own channel is not part of the experiment
             owner[e.gid] = report.node
             (writers if e.kind == "writer" else readers).setdefault(e.topic, []).append(e)

@@ -1,4 +1,4 @@
-"""Cyclone DDS backend: ROS 2 wire conventions without ROS (DESIGN.md §3).
+"""Cyclone DDS backend: ROS 2 wire conventions without ROS (docs/design.md §3).
 
 - Topics are ``rt/<fully qualified name>``; types ``pkg::msg::dds_::Type_``, ``@final``,
   generated from the rosbags Jazzy typestore (dds_types.py).

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .interface import PITCH_JOINT
 from .messages import set_stamp
 from .node import Node, run_node
 from .params import Parameter
@@ -45,7 +46,9 @@ MESSAGE_TYPES = {"joint_state": "sensor_msgs/msg/JointState", "taps": "sensor_ms
 
 def make_message(node: Node, kind: str, seq: int) -> Any:
     if kind == "joint_state":
-        msg = node.new_message("sensor_msgs/msg/JointState", name=["pitch"], position=[float(seq)])
+        msg = node.new_message(
+            "sensor_msgs/msg/JointState", name=[PITCH_JOINT], position=[float(seq)]
+        )
     else:
         fields = [
             node.new_message(

@@ -1,6 +1,8 @@
 """Graph descriptions: the single source of truth for which nodes run, and how.
 
-A graph YAML (read by the launcher here and by the ROS launch files in aero_rig)::
+The one model of a graph YAML: the launcher (rig-launch, aero-rig) and the ROS launch files
+(aero_rig.launch_description) both read graphs through :func:`load_graph`. It imports only
+pyyaml and the standard library, so a ``ros2 launch`` process can use it::
 
     name: sim
     nodes:
@@ -148,7 +150,7 @@ def load_graph(path: str | Path) -> GraphSpec:
     path = Path(path)
     try:
         document = yaml.safe_load(path.read_text())
-    except OSError as exc:
+    except (OSError, yaml.YAMLError) as exc:
         raise GraphError(f"cannot read graph {path}: {exc}") from exc
     return parse_graph(document, path.parent, source=path)
 

@@ -1,4 +1,4 @@
-"""The node API every node of this project is written against (DESIGN.md §3).
+"""The node API every node of this project is written against (docs/design.md §3).
 
 A node module declares its parameters and a class that takes a :class:`Node`::
 
@@ -25,8 +25,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
-from .anomaly import ANOMALY_QOS, ANOMALY_TOPIC, ANOMALY_TYPE, Anomaly, AnomalyLog
-from .barrier import READY_TOPIC, READY_TYPE, Endpoint, ReadinessReport
+from .anomaly import Anomaly, AnomalyLog
+from .barrier import Endpoint, ReadinessReport
+from .interface import EXPERIMENT_ANOMALY, GRAPH_READY
 from .names import ArgumentError, RosArgs, normalize_namespace, parse_ros_args, resolve_name
 from .params import Parameter, ParameterError, ParameterSet, resolve_parameters
 from .qos import QosProfile, resolve_qos
@@ -133,7 +134,7 @@ class Node:
         self.namespace = normalize_namespace(ros_args.namespace or namespace)
         prefix = "" if self.namespace == "/" else self.namespace
         self.fq_name = f"{prefix}/{self.name}"
-        # Parameters are validated before any middleware entity exists (DESIGN.md §8).
+        # Parameters are validated before any middleware entity exists (docs/design.md §8).
         self.params: ParameterSet = resolve_parameters(
             parameters, self.fq_name, ros_args.param_files, ros_args.overrides
         )
@@ -250,7 +251,7 @@ class Node:
         # The anomaly writer exists before the node reports ready, so the barrier sees it matched
         # to the identifier and the recorder: a first anomaly record is never sent into the void.
         _ = self.anomalies
-        self._ready_pub = self.create_publisher(READY_TYPE, READY_TOPIC, "latched")
+        self._ready_pub = self.create_publisher(GRAPH_READY.type, GRAPH_READY.name, GRAPH_READY.qos)
         self._announce()
         self.create_timer(period_s, self._announce)
 
@@ -263,18 +264,20 @@ class Node:
         text = self.readiness_report().to_json()
         if text != self._last_report:
             self._last_report = text
-            self._ready_pub.publish(self.new_message(READY_TYPE, data=text))
+            self._ready_pub.publish(self.new_message(GRAPH_READY.type, data=text))
 
     # -- anomalies (anomaly.py) ------------------------------------------------------------
     @property
     def anomalies(self) -> AnomalyLog:
         """This node's anomaly log: records go to /experiment/anomaly and to the log."""
         if self._anomalies is None:
-            pub = self.create_publisher(ANOMALY_TYPE, ANOMALY_TOPIC, ANOMALY_QOS)
+            pub = self.create_publisher(
+                EXPERIMENT_ANOMALY.type, EXPERIMENT_ANOMALY.name, EXPERIMENT_ANOMALY.qos
+            )
 
             def send(anomaly: Anomaly) -> None:
                 self.logger.warning("anomaly: %s", anomaly.describe())
-                pub.publish(self.new_message(ANOMALY_TYPE, data=anomaly.to_json()))
+                pub.publish(self.new_message(EXPERIMENT_ANOMALY.type, data=anomaly.to_json()))
 
             self._anomalies = AnomalyLog(self.fq_name, send)
         return self._anomalies

@@ -1,4 +1,4 @@
-"""Named QoS profiles shared by both backends (DESIGN.md §3-§4).
+"""Named QoS profiles shared by both backends (docs/design.md §3-§4).
 
 - ``default``: reliable, volatile, keep-last 10 (ROS 2's default profile).
 - ``sensor``: best effort, volatile, keep-last 5 (ROS 2's sensor-data profile).

@@ -187,7 +187,7 @@ class Processes:
 NODE_MODULES = {
     "generator": "multisine_gen.generator_node",
     "sim_actuator": "pitch_actuator.sim_actuator_node",
-    "sim_wing": "pressure_scanner.sim_wing_node",
+    "sim_wing": "wing_sim.sim_wing_node",
     "lift": "pressure_scanner.lift_node",
     "identifier": "aero_identification.identifier_node",
     "recorder": "rig_runtime.recorder",

@@ -1,6 +1,7 @@
 """Anomaly records (anomaly.py): episodes, points, the wire format."""
 
 import pytest
+
 from rig_runtime.anomaly import Anomaly, AnomalyLog
 
 

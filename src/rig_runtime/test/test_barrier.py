@@ -1,7 +1,9 @@
 """The start barrier's decision (barrier.py), in-process: reports in, problems out."""
 
 import pytest
-from rig_runtime.barrier import READY_TOPIC, Endpoint, ReadinessReport, StartBarrier, compatible
+
+from rig_runtime.barrier import Endpoint, ReadinessReport, StartBarrier, compatible
+from rig_runtime.interface import GRAPH_READY
 
 
 def _w(topic: str, gid: str, matched: tuple[str, ...] | None = (), **kw: object) -> Endpoint:
@@ -158,8 +160,8 @@ def test_counts_when_gids_are_unknown_rclpy() -> None:
 
 def test_the_readiness_topic_itself_is_not_checked() -> None:
     barrier = StartBarrier(["a"])
-    barrier.update(ReadinessReport("/a", True, endpoints=(_w(READY_TOPIC, "W", ()),)))
-    barrier.update(ReadinessReport("/b", True, endpoints=(_r(READY_TOPIC, "R", ()),)))
+    barrier.update(ReadinessReport("/a", True, endpoints=(_w(GRAPH_READY.name, "W", ()),)))
+    barrier.update(ReadinessReport("/b", True, endpoints=(_r(GRAPH_READY.name, "R", ()),)))
     assert barrier.pending() == []
 
 

@@ -4,6 +4,7 @@
 from types import SimpleNamespace
 
 from rig_runtime.barrier import ReadinessReport, StartBarrier
+from rig_runtime.interface import PITCH_COMMAND
 from rig_runtime.qos import PROFILES
 from rig_runtime.rclpy_backend import RclpyBackend, RclpyPublisher
 
@@ -18,22 +19,22 @@ def _backend(fq_name: str, endpoints: list[tuple[str, object, object]]) -> Rclpy
 def test_counts_not_gids_and_the_barrier_decides_on_them() -> None:
     writer = RclpyPublisher(
         SimpleNamespace(get_subscription_count=lambda: 1),
-        "/pitch/command",
+        PITCH_COMMAND.name,
         "sensor_msgs/msg/JointState",
         PROFILES["stream"],
     )
-    reader = SimpleNamespace(topic_name="/pitch/command", get_publisher_count=lambda: 1)
+    reader = SimpleNamespace(topic_name=PITCH_COMMAND.name, get_publisher_count=lambda: 1)
     gen = _backend("/generator", [("writer", writer, PROFILES["stream"])]).endpoints()
     act = _backend("/sim_actuator", [("reader", reader, PROFILES["stream"])]).endpoints()
     assert gen[0].matched is None and gen[0].matched_count == 1 and gen[0].kind == "writer"
-    assert act[0].topic == "/pitch/command" and act[0].matched_count == 1
+    assert act[0].topic == PITCH_COMMAND.name and act[0].matched_count == 1
     assert not act[0].transient_local and act[0].reliable
     barrier = StartBarrier(["sim_actuator"])
     barrier.update(ReadinessReport("/sim_actuator", True, endpoints=tuple(act)))
     assert barrier.pending(ReadinessReport("/generator", True, endpoints=tuple(gen))) == []
     lonely = RclpyPublisher(
         SimpleNamespace(get_subscription_count=lambda: 0),
-        "/pitch/command",
+        PITCH_COMMAND.name,
         "sensor_msgs/msg/JointState",
         PROFILES["stream"],
     )

@@ -2,16 +2,18 @@
 
 from pathlib import Path
 
-from rig_runtime.bag import SplitBagWriter, _McapFile
-from rig_runtime.messages import new_message, serialize
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.storage_mcap import McapWriter
 
+from rig_runtime.bag import SplitBagWriter, _McapFile
+from rig_runtime.interface import PITCH_STATE
+from rig_runtime.messages import new_message, serialize
+
 
 def test_fast_message_records_equal_rosbags_records(tmp_path: Path) -> None:
     bag = SplitBagWriter(tmp_path / "bag")
-    cid = bag.add_connection("/pitch/state", "sensor_msgs/msg/JointState")
+    cid = bag.add_connection(PITCH_STATE.name, "sensor_msgs/msg/JointState")
     conn = bag.connections[cid - 1]
     ours = _McapFile(tmp_path / "ours.mcap")
     (tmp_path / "ref").mkdir()

@@ -6,10 +6,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import pytest
+
+from rig_runtime import Node
 from rig_runtime.demo_nodes import make_message
 from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 
-from rig_runtime import Node
+pytestmark = pytest.mark.slow  # node processes talking DDS: `make test-fast` skips them
 
 
 def _listener_args(result: Path, **params: object) -> list[str]:

@@ -9,9 +9,13 @@ import time
 from pathlib import Path
 
 import psutil
+import pytest
 import yaml
+
 from rig_runtime.graph import load_graph
 from rig_runtime.testing import descendants, finish, graph_env, process_gone, wait_for
+
+pytestmark = pytest.mark.slow  # node processes talking DDS: `make test-fast` skips them
 
 
 def _graph(tmp_path: Path, talker_exit: int, listener_result: Path) -> Path:
@@ -98,6 +102,7 @@ def test_duration_and_sigterm_reap_every_child(tmp_path: Path) -> None:
 
 def test_graph_description_errors(tmp_path: Path) -> None:
     import pytest
+
     from rig_runtime.graph import GraphError
 
     bad = tmp_path / "bad.yaml"
@@ -128,6 +133,7 @@ def _unknown_exe(tmp_path: Path) -> Path:
 
 def test_nice_lowers_a_node_priority(tmp_path: Path) -> None:
     import pytest
+
     from rig_runtime.graph import GraphError
 
     graph = yaml.safe_load(_graph(tmp_path, 0, tmp_path / "listener.json").read_text())

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from rig_runtime.names import parse_ros_args
 from rig_runtime.params import Parameter, ParameterError, resolve_parameters
 from rig_runtime.testing import graph_env

@@ -6,9 +6,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+
 from rig_runtime.demo_nodes import TAP_COUNT
 from rig_runtime.testing import Processes, graph_env, wait_for
-from rosbags.highlevel import AnyReader
+
+pytestmark = pytest.mark.slow  # node processes talking DDS: `make test-fast` skips them
 
 
 def _read(bag: Path) -> tuple[list[int], list[str], dict]:

@@ -2,7 +2,9 @@
 
 import numpy as np
 import pytest
+
 from rig_runtime.dds_types import idl_struct, to_idl
+from rig_runtime.interface import PITCH_COMMAND
 from rig_runtime.messages import (
     dds_type_name,
     deserialize,
@@ -67,7 +69,7 @@ def test_dds_names_follow_ros2_conventions() -> None:
     assert cls.__idl_annotations__["extensibility"] == "final"
     assert type_hash("std_msgs/msg/String").startswith("RIHS01_")
     assert resolve_name("pitch/command", "/rig", "gen", {}) == "/rig/pitch/command"
-    assert resolve_name("/pitch/command", "/rig", "gen", {}) == "/pitch/command"
+    assert resolve_name(PITCH_COMMAND.name, "/rig", "gen", {}) == PITCH_COMMAND.name
     assert resolve_name("~/status", "/", "gen", {}) == "/gen/status"
     assert resolve_name("/a", "/", "n", {"/a": "/b"}) == "/b"
 

@@ -1,0 +1,453 @@
+"""``RigViewLogger``: rig messages (plain objects, no middleware) into Rerun logs."""
+
+import json
+import math
+import time
+from collections import OrderedDict, deque
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import rerun as rr
+
+from pressure_scanner.rig_geometry import RigGeometry
+from pressure_scanner.tap_cloud import read_cloud
+from rig_runtime import stamp_to_ns
+from rig_runtime.interface import (
+    EXPERIMENT_SEGMENT,
+    IDENTIFICATION_MODEL,
+    PITCH_JOINT,
+    joint_position,
+)
+
+from .blueprint import (
+    BLUE,
+    CLUSTER_COLORS,
+    ENTITY,
+    GRAY,
+    GREEN,
+    ORANGE,
+    RED,
+    TIMELINE,
+    cl_alpha_to_view,
+    cp_to_view,
+    make_blueprint,
+    slug,
+)
+
+PREDICTION_SERIES = (("cl_measured", "measured", GRAY), ("cl_bla_ss", "bla_ss", BLUE))
+PREDICTION_SERIES += (("cl_pnlss", "pnlss", ORANGE),)
+STATUS_LEVELS = {0: "INFO", 1: "WARN", 2: "ERROR", 3: "WARN"}
+
+
+def _float_array(values: Any) -> np.ndarray:
+    """A float64 array from a JSON list (None -> NaN)."""
+    if values is None:
+        return np.zeros(0)
+    return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+
+
+def _db(values: np.ndarray, power: bool) -> np.ndarray:
+    """20·log10|x| (amplitude) or 10·log10(x) (power/variance); NaN where not positive."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = (10.0 if power else 20.0) * np.log10(values)
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
+def json_object(text: str, topic: str) -> dict[str, Any]:
+    """The JSON object a std_msgs/String of ``topic`` carries; ValueError naming the topic."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{topic}: not JSON ({exc})") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{topic}: expected a JSON object")
+    return value
+
+
+def finite_runs(x: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
+    """(n, 2) strips of the consecutive finite (x, y) points (a NaN breaks the line)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    strips, start = [], None
+    for i, good in enumerate(np.append(ok, False)):
+        if good and start is None:
+            start = i
+        elif not good and start is not None:
+            if i - start >= 2:
+                strips.append(np.column_stack([x[start:i], y[start:i]]))
+            start = None
+    return strips
+
+
+def _axes(
+    x_ticks: Sequence[float],
+    y_ticks: Sequence[float],
+    to_view: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    x_label: str,
+    y_label: str,
+) -> tuple[rr.LineStrips2D, rr.Points2D]:
+    """Axis lines through the origin with labelled ticks, in view coordinates."""
+    x0, x1, y0, y1 = min(x_ticks), max(x_ticks), min(y_ticks), max(y_ticks)
+    xa, ya = to_view(np.array([x0, x1]), np.array([0.0, 0.0]))
+    xb, yb = to_view(np.array([0.0, 0.0]), np.array([y0, y1]))
+    tx, ty = to_view(np.asarray(x_ticks, float), np.zeros(len(x_ticks)))
+    ux, uy = to_view(np.zeros(len(y_ticks)), np.asarray(y_ticks, float))
+    labels = [f"{v:g}" for v in x_ticks] + [f"{v:g}" for v in y_ticks]
+    labels[-1] = f"{y_ticks[-1]:g} {y_label}"
+    labels[len(x_ticks) - 1] = f"{x_ticks[-1]:g} {x_label}"
+    lines = rr.LineStrips2D(
+        [np.column_stack([xa, ya]), np.column_stack([xb, yb])], colors=GRAY, radii=-0.5
+    )
+    ticks = rr.Points2D(
+        np.column_stack([np.concatenate([tx, ux]), np.concatenate([ty, uy])]),
+        labels=labels,
+        show_labels=True,
+        colors=GRAY,
+        radii=-2.0,
+    )
+    return lines, ticks
+
+
+class RigViewLogger:
+    """Logs rig messages to a Rerun recording; no middleware (plain message objects in).
+
+    One ``on_<topic>`` method per topic. Time series are logged at every
+    ``series_decimation``-th sample, the Cp distribution and the live C_l–α trail at every
+    ``taps_decimation``-th. Model updates replace the FRF, cluster and prediction entities.
+    Unparseable input raises ``ValueError``; callers decide whether to go on.
+    """
+
+    def __init__(
+        self,
+        recording: rr.RecordingStream,
+        *,
+        taps_decimation: int = 10,
+        series_decimation: int = 1,
+        trail_s: float = 2.0,
+        dynamic_pressure_pa: float | None = None,
+        chord_m: float | None = None,
+        send_blueprint: bool = True,
+    ) -> None:
+        if taps_decimation < 1 or series_decimation < 1:
+            raise ValueError("taps_decimation and series_decimation must be >= 1")
+        wing = RigGeometry()
+        self.rec = recording
+        self.taps_decimation = int(taps_decimation)
+        self.series_decimation = int(series_decimation)
+        self.trail_ns = int(trail_s * 1e9)
+        self.q_pa = float(dynamic_pressure_pa or wing.dynamic_pressure_pa)
+        self.chord_m = float(chord_m or wing.chord_m)
+        self.counts = dict.fromkeys(
+            ("command", "state", "taps", "coefficients", "segment", "model", "status"), 0
+        )
+        self.counts["cl_invalid"] = 0
+        self.last_ns: int | None = None
+        self._alpha_by_stamp: OrderedDict[int, float] = OrderedDict()
+        self._last_alpha: float | None = None
+        self._trail: deque[tuple[int, float, float]] = deque()
+        self._levels: list[str] = []
+        self._send_blueprint = send_blueprint
+        self._model_entities: set[str] = set()
+        self._status_seen: dict[str, tuple[Any, ...]] = {}
+        self._log_static()
+        if send_blueprint:
+            self.rec.send_blueprint(make_blueprint())
+
+    # -- helpers -------------------------------------------------------------------------------
+
+    def _log_static(self) -> None:
+        log = self.rec.log
+        log(ENTITY["command"], rr.SeriesLines(colors=GRAY, names="command [deg]"), static=True)
+        log(ENTITY["measured"], rr.SeriesLines(colors=BLUE, names="measured [deg]"), static=True)
+        log(ENTITY["cl"], rr.SeriesLines(colors=RED, names="C_l"), static=True)
+        lines, ticks = _axes(
+            [0.0, 0.25, 0.5, 0.75, 1.0], [-1.0, 0.0, 1.0, 2.0, 3.0],
+            lambda x, y: cp_to_view(x, -y), "x/c", "−Cp",
+        )  # fmt: skip
+        log(ENTITY["cp_axes"], lines, ticks, static=True)
+        lines, ticks = _axes(
+            [0.0, 10.0, 20.0, 30.0], [0.0, 0.5, 1.0, 1.5, 2.0], cl_alpha_to_view, "α [deg]", "C_l"
+        )
+        log(ENTITY["cl_alpha_axes"], lines, ticks, static=True)
+
+    def _set_time(self, t_ns: int | None) -> None:
+        """Set the experiment time; ``None``: the latest stamp seen (or now, before any)."""
+        if t_ns is None or t_ns <= 0:
+            t_ns = self.last_ns if self.last_ns is not None else time.time_ns()
+        else:
+            self.last_ns = t_ns if self.last_ns is None else max(self.last_ns, t_ns)
+        self.rec.set_time(TIMELINE, timestamp=np.datetime64(int(t_ns), "ns"))
+
+    @staticmethod
+    def _pitch_deg(msg: Any) -> float | None:
+        value = joint_position(msg, PITCH_JOINT)
+        return None if value is None else math.degrees(value)
+
+    def _clear_missing(self, prefix: str, present: set[str]) -> None:
+        """Clear entities under ``prefix`` logged by an earlier model but absent now."""
+        for path in sorted(p for p in self._model_entities if p.startswith(prefix)):
+            if path not in present:
+                self.rec.log(path, rr.Clear(recursive=True))
+                self._model_entities.discard(path)
+        self._model_entities |= present
+
+    # -- sample streams ------------------------------------------------------------------------
+
+    def on_command(self, msg: Any) -> None:
+        n = self.counts["command"]
+        self.counts["command"] += 1
+        deg = self._pitch_deg(msg)
+        if deg is None or n % self.series_decimation:
+            return
+        self._set_time(stamp_to_ns(msg.header.stamp))
+        self.rec.log(ENTITY["command"], rr.Scalars(deg))
+
+    def on_state(self, msg: Any) -> None:
+        n = self.counts["state"]
+        self.counts["state"] += 1
+        deg = self._pitch_deg(msg)
+        if deg is None:
+            return
+        t_ns = stamp_to_ns(msg.header.stamp)
+        self._alpha_by_stamp[t_ns] = deg
+        while len(self._alpha_by_stamp) > 4096:
+            self._alpha_by_stamp.popitem(last=False)
+        self._last_alpha = deg
+        if n % self.series_decimation:
+            return
+        self._set_time(t_ns)
+        self.rec.log(ENTITY["measured"], rr.Scalars(deg))
+
+    def on_coefficients(self, msg: Any) -> None:
+        n = self.counts["coefficients"]
+        self.counts["coefficients"] += 1
+        cl = float(msg.vector.x)
+        if not math.isfinite(cl):  # NaN = invalid sample (docs/design.md §8): a gap, not a value
+            self.counts["cl_invalid"] += 1
+            return
+        t_ns = stamp_to_ns(msg.header.stamp)
+        if n % self.series_decimation == 0:
+            self._set_time(t_ns)
+            self.rec.log(ENTITY["cl"], rr.Scalars(cl))
+        if n % self.taps_decimation:
+            return
+        # The live C_l–α trail: decimated samples of the last trail_s seconds, as one strip.
+        alpha = self._alpha_by_stamp.get(t_ns, self._last_alpha)
+        if alpha is None:
+            return
+        self._trail.append((t_ns, alpha, cl))
+        while self._trail and self._trail[0][0] < t_ns - self.trail_ns:
+            self._trail.popleft()
+        if len(self._trail) >= 2:
+            trail = np.array([(a, c) for _, a, c in self._trail])
+            x, y = cl_alpha_to_view(trail[:, 0], trail[:, 1])
+            self._set_time(t_ns)
+            self.rec.log(
+                ENTITY["cl_alpha_live"],
+                rr.LineStrips2D([np.column_stack([x, y])], colors=GREEN, radii=-1.5),
+            )
+
+    def on_taps(self, msg: Any) -> None:
+        n = self.counts["taps"]
+        self.counts["taps"] += 1
+        if n % self.taps_decimation:
+            return
+        xyz, pressures = read_cloud(msg)
+        x_c = xyz[:, 0] / self.chord_m
+        cp = pressures / self.q_pa
+        self._set_time(stamp_to_ns(msg.header.stamp))
+        z = xyz[:, 2]
+        upper = z >= -1e-9  # the leading-edge tap (z = 0) closes both surfaces
+        lower = z <= 1e-9
+        for key, mask, color in (("cp_upper", upper, BLUE), ("cp_lower", lower, ORANGE)):
+            order = np.argsort(x_c[mask], kind="stable")
+            vx, vy = cp_to_view(x_c[mask][order], cp[mask][order])
+            self.rec.log(ENTITY[key], rr.LineStrips2D(finite_runs(vx, vy), colors=color))
+        ok = np.isfinite(cp)
+        vx, vy = cp_to_view(x_c[ok], cp[ok])
+        colors = np.where((z[ok] > 1e-9)[:, None], BLUE, ORANGE).astype(np.uint8)
+        self.rec.log(
+            ENTITY["cp_taps"], rr.Points2D(np.column_stack([vx, vy]), colors=colors, radii=-3.0)
+        )
+
+    # -- events --------------------------------------------------------------------------------
+
+    def on_segment(self, msg: Any) -> None:
+        self.counts["segment"] += 1
+        event = json_object(msg.data, EXPERIMENT_SEGMENT.name)
+        edge = event.get("event", "?")
+        stamp_key = {"start": "start_stamp_s", "end": "end_stamp_s"}.get(edge)
+        t_ns = None
+        if stamp_key and isinstance(event.get(stamp_key), int | float):
+            t_ns = round(event[stamp_key] * 1e9)
+        self._set_time(t_ns)
+        level = "WARN" if edge == "plan_aborted" else "INFO"
+        self.rec.log(ENTITY["segment"], rr.TextLog(describe_segment(event), level=level))
+
+    def on_status(self, msg: Any) -> None:
+        self.counts["status"] += 1
+        self._set_time(stamp_to_ns(msg.header.stamp))
+        for status in msg.status:
+            values = tuple((kv.key, kv.value) for kv in status.values)
+            key = (int(status.level), status.message, values)
+            if self._status_seen.get(status.name) == key:
+                continue  # only changes reach the log
+            self._status_seen[status.name] = key
+            text = f"{status.name}: {status.message}"
+            if values:
+                text += " (" + ", ".join(f"{k}={v}" for k, v in values) + ")"
+            level = STATUS_LEVELS.get(int(status.level), "WARN")
+            self.rec.log(ENTITY["status"], rr.TextLog(text, level=level))
+
+    # -- model ---------------------------------------------------------------------------------
+
+    def on_model(self, msg: Any) -> None:
+        self.counts["model"] += 1
+        model = json_object(msg.data, IDENTIFICATION_MODEL.name)
+        stamp = model.get("stamp_ns")
+        self._set_time(int(stamp) if isinstance(stamp, int | float) else None)
+        levels = model.get("levels") or {}
+        if not isinstance(levels, dict):
+            levels = {}
+        summary = [f"# Model refit {model.get('refit', '?')}", ""]
+        frf_paths: set[str] = set()
+        cluster_paths: set[str] = set()
+        for name, level in sorted(levels.items()):
+            if not isinstance(level, dict):
+                continue
+            frf_paths |= self._log_frf(name, level.get("bla") or {})
+            paths, text = self._log_clusters(name, level.get("clusters") or {})
+            cluster_paths |= paths
+            offset = level.get("offset_deg")
+            head = f"- level {name}" + (f" (offset {offset:g}°)" if offset is not None else "")
+            summary.append(head + (f": {text}" if text else ""))
+        self._clear_missing("/frf/", frf_paths)
+        self._clear_missing("/clusters/", cluster_paths)
+        self._clear_missing("/cl_alpha/predictions/", self._log_predictions(model))
+        summary.append("")
+        summary.append(
+            "FRF variances as published by the identifier (var_noise, var_nl); "
+            "C_l–α plot: α [deg] right, C_l up."
+        )
+        self.rec.log(
+            ENTITY["summary"], rr.TextDocument("\n".join(summary), media_type="text/markdown")
+        )
+        table = (model.get("table1") or {}).get("markdown")
+        if isinstance(table, str) and table.strip():
+            self.rec.log(ENTITY["table1"], rr.TextDocument(table, media_type="text/markdown"))
+        self.rec.log(
+            ENTITY["model_event"],
+            rr.TextLog(
+                f"model refit {model.get('refit', '?')}: levels {sorted(levels)}, "
+                f"{len(model.get('predictions') or [])} predictions",
+                level="INFO",
+            ),
+        )
+        names = sorted(str(k) for k in levels)
+        if self._send_blueprint and names != self._levels:
+            self.rec.send_blueprint(make_blueprint(names))
+        self._levels = names
+
+    def _log_frf(self, level: str, bla: dict[str, Any]) -> set[str]:
+        f = _float_array(bla.get("freq_hz"))
+        if f.size == 0:
+            return set()
+        g = _float_array(bla.get("G_re")) + 1j * _float_array(bla.get("G_im"))
+        if g.shape != f.shape:
+            raise ValueError(f"level {level}: G_re/G_im length differs from freq_hz")
+        steps = np.diff(np.sort(f))
+        steps = steps[steps > 0]
+        df = float(np.median(steps)) if steps.size else 0.04
+        base = f"/frf/level_{slug(level)}"
+        series = [("G_dB", _db(np.abs(g), power=False), 0.0, BLUE)]
+        for key, name, shift, color in (
+            ("var_noise", "noise_dB", -0.25, GRAY),
+            ("var_nl", "nl_distortion_dB", 0.25, RED),
+        ):
+            v = _float_array(bla.get(key))
+            if v.shape == f.shape:
+                series.append((name, _db(v, power=True), shift, color))
+        paths = set()
+        for name, values, shift, color in series:
+            ok = np.isfinite(values) & np.isfinite(f)
+            path = f"{base}/{name}"
+            self.rec.log(
+                path,
+                rr.BarChart(
+                    values[ok], abscissa=f[ok] + shift * df, widths=[0.22 * df], color=color
+                ),
+            )
+            paths.add(path)
+        return paths
+
+    def _log_clusters(self, level: str, clusters: dict[str, Any]) -> tuple[set[str], str]:
+        labels = clusters.get("labels")
+        if not labels:
+            return set(), ""
+        arr = np.array(labels, dtype=np.int64)
+        if arr.ndim != 2:
+            raise ValueError(f"level {level}: clusters.labels must be P x M, got {arr.shape}")
+        n_periods, n_real = arr.shape
+        dominant = clusters.get("dominant")
+        # Periods in time order: realization by realization, period by period.
+        order = arr.T.reshape(-1)
+        index = np.arange(1, order.size + 1)
+        paths = set()
+        base = f"/clusters/level_{slug(level)}"
+        for c in np.unique(order):
+            path = f"{base}/cluster_{c}" if c >= 0 else f"{base}/excluded"
+            height = 1.0 if c == dominant else (0.6 if c >= 0 else 0.3)
+            color = CLUSTER_COLORS[c % len(CLUSTER_COLORS)] if c >= 0 else GRAY
+            sel = order == c
+            self.rec.log(
+                path,
+                rr.BarChart(
+                    np.full(int(sel.sum()), height), abscissa=index[sel], widths=[0.8], color=color
+                ),
+            )
+            paths.add(path)
+        rows = "; ".join(f"r{m}: {' '.join(map(str, arr[:, m]))}" for m in range(n_real))
+        text = f"k = {clusters.get('k', '?')}, dominant {dominant}, labels per period {rows}"
+        return paths, text + f" ({n_periods} periods x {n_real} realizations)"
+
+    def _log_predictions(self, model: dict[str, Any]) -> set[str]:
+        paths = set()
+        for i, pred in enumerate(model.get("predictions") or []):
+            if not isinstance(pred, dict):
+                continue
+            alpha = _float_array(pred.get("alpha_deg"))
+            base = f"/cl_alpha/predictions/{slug(pred.get('name', f'prediction {i}'))}"
+            for key, name, color in PREDICTION_SERIES:
+                cl = _float_array(pred.get(key))
+                if cl.size == 0 or cl.shape != alpha.shape:
+                    continue
+                x, y = cl_alpha_to_view(alpha, cl)
+                path = f"{base}/{name}"
+                radius = -2.0 if name == "measured" else -1.0
+                self.rec.log(path, rr.LineStrips2D(finite_runs(x, y), colors=color, radii=radius))
+                paths.add(path)
+        return paths
+
+    def flush(self, timeout_s: float = 10.0) -> None:
+        self.rec.flush(timeout_sec=timeout_s)
+
+
+def describe_segment(event: dict[str, Any]) -> str:
+    """One line for a segment event: ``start multisine level 0 realization 1 period 2 …``."""
+    edge = event.get("event", "?")
+    if edge not in ("start", "end"):
+        extra = {k: v for k, v in event.items() if k != "event"}
+        return f"{edge} {json.dumps(extra, sort_keys=True)}"
+    parts = [edge, str(event.get("kind", "?"))]
+    for key in ("level", "realization", "period"):
+        if event.get(key) is not None:
+            parts.append(f"{key} {event[key]}")
+    if event.get("kind") in ("sine",) or event.get("excitation") == "sine":
+        if event.get("frequency_hz") is not None:
+            parts.append(f"{event['frequency_hz']:g} Hz")
+    if event.get("offset_deg") is not None:
+        parts.append(f"(offset {event['offset_deg']:g}°)")
+    if event.get("index") is not None:
+        parts.append(f"[segment {event['index']}]")
+    return " ".join(parts)

@@ -1,0 +1,125 @@
+"""The ``view`` node: subscribes the rig topics and logs them through ``RigViewLogger``."""
+
+import os
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, ClassVar
+
+from rig_runtime import Node, Parameter, run_node
+from rig_runtime.interface import (
+    EXPERIMENT_SEGMENT,
+    IDENTIFICATION_MODEL,
+    IDENTIFICATION_STATUS,
+    PITCH_COMMAND,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    WING_COEFFICIENTS,
+)
+from rig_runtime.node import BACKEND_ENV, EXIT_CONFIG_ERROR
+
+from .logger import RigViewLogger
+from .recording import MODES, TOPICS, close_recording, open_recording
+
+PARAMETERS = [
+    Parameter("mode", "save", "where the view goes", choices=MODES),
+    Parameter("rrd_path", "", ".rrd file to write (needed by 'save'; other modes also save)"),
+    Parameter("application_id", "aero_rig", "Rerun application id (groups recordings)"),
+    Parameter("taps_decimation", 10, "log every n-th Cp distribution / C_l–α trail", min=1),
+    Parameter("series_decimation", 1, "log every n-th pitch / C_l sample", min=1),
+    Parameter("trail_s", 2.0, "length of the live C_l–α trail [s]", min=0.0),
+    Parameter("port", 0, "spawn: viewer port; serve: gRPC port (0 = 9876)", min=0, max=65535),
+    Parameter("bind_ip", "127.0.0.1", "serve: address to listen on (0.0.0.0 = all)"),
+    Parameter("url", "", "connect: viewer gRPC URL (empty: rerun+http://127.0.0.1:9876/proxy)"),
+    Parameter("stats_period_s", 10.0, "log message counts every … s (0 = never)", min=0.0),
+]
+
+
+class View:
+    """The view node: subscribes the rig topics and feeds a :class:`RigViewLogger`.
+
+    High-rate streams are read best effort (a slow viewer drops samples, it never holds back
+    the experiment; best effort matches reliable and best-effort publishers); segment events
+    reliable and deep; model and status latched, so a late view still gets the current model.
+    """
+
+    QOS: ClassVar[dict[str, tuple[str, int | None]]] = {
+        PITCH_COMMAND.name: ("sensor", 1000),
+        PITCH_STATE.name: ("sensor", 1000),
+        PRESSURE_TAPS.name: ("sensor", 200),
+        WING_COEFFICIENTS.name: ("sensor", 1000),
+        EXPERIMENT_SEGMENT.name: (EXPERIMENT_SEGMENT.qos, None),
+        IDENTIFICATION_MODEL.name: (IDENTIFICATION_MODEL.qos, None),
+        IDENTIFICATION_STATUS.name: (IDENTIFICATION_STATUS.qos, 100),
+    }
+
+    def __init__(self, node: Node) -> None:
+        p = node.params
+        self.node = node
+        self.rec, where = open_recording(
+            p["application_id"],
+            p["mode"],
+            p["rrd_path"] or None,
+            port=p["port"],
+            url=p["url"],
+            bind_ip=p["bind_ip"],
+        )
+        self.logger = RigViewLogger(
+            self.rec,
+            taps_decimation=p["taps_decimation"],
+            series_decimation=p["series_decimation"],
+            trail_s=p["trail_s"],
+        )
+        self.errors = 0
+        for topic, (type_name, handler) in TOPICS.items():
+            qos, depth = self.QOS[topic]
+            node.create_subscription(
+                type_name, topic, self._guard(topic, getattr(self.logger, handler)), qos, depth
+            )
+        if p["stats_period_s"] > 0:
+            node.create_timer(p["stats_period_s"], self.log_stats)
+        node.logger.info("view: %s", where)
+
+    def _guard(self, topic: str, handler: Callable[[Any], None]) -> Callable[[Any], None]:
+        def call(msg: Any) -> None:
+            try:
+                handler(msg)
+            except (ValueError, KeyError, TypeError) as exc:
+                self.errors += 1
+                if self.errors <= 20 or self.errors % 1000 == 0:
+                    self.node.logger.warning("%s: %s (%d bad messages)", topic, exc, self.errors)
+
+        return call
+
+    def log_stats(self) -> None:
+        counts = " ".join(f"{k}={v}" for k, v in self.logger.counts.items())
+        self.node.logger.info("received %s errors=%d", counts, self.errors)
+
+    def close(self) -> None:
+        self.log_stats()
+        close_recording(self.rec)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from . import __doc__ as description  # --help shows the package docstring
+
+    # rerun and rclpy's numpy 1.26 extensions cannot share a process (docs/design.md §3).
+    previous = os.environ.get(BACKEND_ENV)
+    if (previous or "").strip().lower() == "rclpy":
+        print(
+            f"[FATAL] [view]: {BACKEND_ENV}=rclpy: the Rerun view runs on the Cyclone DDS "
+            "backend only (rerun needs numpy >= 2)",
+            file=sys.stderr,
+        )
+        return EXIT_CONFIG_ERROR
+    os.environ[BACKEND_ENV] = "dds"
+    try:
+        return run_node(View, "view", PARAMETERS, argv, description=description)
+    finally:
+        if previous is None:
+            os.environ.pop(BACKEND_ENV, None)
+        else:
+            os.environ[BACKEND_ENV] = previous
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

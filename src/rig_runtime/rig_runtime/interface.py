@@ -1,0 +1,188 @@
+"""The rig's interface contract: every topic with its type and QoS, and the joint names.
+
+This is the one place the graph's interface is written (docs/design.md §4). Nodes, the view,
+the offline fit, the launch files and the tests take names, types and QoS from here; a topic
+name written as a literal elsewhere is a second copy that can drift.
+
+The module imports nothing but the standard library and :mod:`rig_runtime.qos`, so the ROS
+launch files and offline tools can use it without loading a middleware.
+
+Types are ROS 2 interface names from ros-jazzy-common-interfaces; values on the wire are SI
+(angles in rad, pressures in Pa) as REP 103 asks. A node may offer another QoS where its
+parameters say so (``state_qos``, ``taps_qos``, the lift node's ``qos``); ``qos`` below is
+the profile every node of the project uses by default (names from :data:`rig_runtime.qos.PROFILES`).
+"""
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = [
+    "ALPHA_TRUE_JOINT",
+    "DIAGNOSTICS",
+    "EXPERIMENT_ANOMALY",
+    "EXPERIMENT_PLAN",
+    "EXPERIMENT_SEGMENT",
+    "GRAPH_READY",
+    "IDENTIFICATION_MODEL",
+    "IDENTIFICATION_STATUS",
+    "PITCH_COMMAND",
+    "PITCH_JOINT",
+    "PITCH_STATE",
+    "PITCH_STOP",
+    "PRESSURE_TAPS",
+    "PRESSURE_TARE",
+    "RECORDED_TOPICS",
+    "TOPICS",
+    "WING_COEFFICIENTS",
+    "Topic",
+    "joint_position",
+    "topic_by_name",
+]
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of the graph: name, ROS 2 type, default QoS profile, and what it carries."""
+
+    name: str
+    type: str
+    qos: str
+    content: str
+
+
+PITCH_COMMAND = Topic(
+    "/pitch/command",
+    "sensor_msgs/msg/JointState",
+    "stream",
+    "pitch set-point of joint 'pitch' [rad]; sample k of the plan stamped t0 + k/fs",
+)
+PITCH_STATE = Topic(
+    "/pitch/state",
+    "sensor_msgs/msg/JointState",
+    "stream",
+    "measured pitch [rad] and rate [rad/s] of joint 'pitch' (simulation adds 'alpha_true')",
+)
+PITCH_STOP = Topic(
+    "/pitch/stop", "std_msgs/msg/Bool", "default", "true: the actuator holds and stops"
+)
+PRESSURE_TAPS = Topic(
+    "/pressure/taps",
+    "sensor_msgs/msg/PointCloud2",
+    "stream",
+    "49 tap pressures [Pa] as points x, y, z (tap position) and p; one cloud per scan",
+)
+PRESSURE_TARE = Topic(
+    "/pressure/tare", "std_msgs/msg/Bool", "default", "true: the scanner re-zeroes its channels"
+)
+WING_COEFFICIENTS = Topic(
+    "/wing/coefficients",
+    "geometry_msgs/msg/Vector3Stamped",
+    "stream",
+    "x = C_l, y = C_d (pressure drag), z = C_m,c/4 by pressure integration, stamped as the taps",
+)
+EXPERIMENT_PLAN = Topic(
+    "/experiment/plan",
+    "std_msgs/msg/String",
+    "latched",
+    "the whole experiment plan as JSON (multisine_gen.plan_format); every sample rebuildable",
+)
+EXPERIMENT_SEGMENT = Topic(
+    "/experiment/segment",
+    "std_msgs/msg/String",
+    "events",
+    "JSON event at each segment boundary of the plan (and plan_end)",
+)
+EXPERIMENT_ANOMALY = Topic(
+    "/experiment/anomaly",
+    "std_msgs/msg/String",
+    "events",
+    "JSON record of a stretch of the experiment that must be excluded (rig_runtime.anomaly)",
+)
+IDENTIFICATION_STATUS = Topic(
+    "/identification/status",
+    "diagnostic_msgs/msg/DiagnosticArray",
+    "latched",
+    "the identifier's state: periods buffered, clusters, refit progress, data quality",
+)
+IDENTIFICATION_MODEL = Topic(
+    "/identification/model",
+    "std_msgs/msg/String",
+    "latched",
+    "the latest models as JSON (BLA, clusters, linear SS, PNLSS, validation errors)",
+)
+GRAPH_READY = Topic(
+    "/graph/ready",
+    "std_msgs/msg/String",
+    "latched",
+    "each node's readiness report as JSON, for the start barrier (rig_runtime.barrier)",
+)
+DIAGNOSTICS = Topic(
+    "/diagnostics",
+    "diagnostic_msgs/msg/DiagnosticArray",
+    "default",
+    "ROS diagnostics: safety events, link state, tap exclusions",
+)
+
+TOPICS: tuple[Topic, ...] = (
+    PITCH_COMMAND,
+    PITCH_STATE,
+    PITCH_STOP,
+    PRESSURE_TAPS,
+    PRESSURE_TARE,
+    WING_COEFFICIENTS,
+    EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
+    EXPERIMENT_ANOMALY,
+    IDENTIFICATION_STATUS,
+    IDENTIFICATION_MODEL,
+    GRAPH_READY,
+    DIAGNOSTICS,
+)
+
+# What a run records (the recorder's `topics` in config/recorder.yaml, and the ROS launch
+# files' `record:=true`): the experiment's data, what the offline fit must exclude, the
+# identifier's results and the diagnostics. Commands to the rig (stop, tare) and the start
+# barrier's reports are not data.
+RECORDED_TOPICS: tuple[Topic, ...] = (
+    PITCH_COMMAND,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    WING_COEFFICIENTS,
+    EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
+    EXPERIMENT_ANOMALY,
+    IDENTIFICATION_STATUS,
+    IDENTIFICATION_MODEL,
+    DIAGNOSTICS,
+)
+
+# Joint names in sensor_msgs/JointState.
+PITCH_JOINT = "pitch"  # the wing's pitch angle (geometric angle of attack) [rad]
+ALPHA_TRUE_JOINT = "alpha_true"  # simulation only: the plant's true angle [rad]
+
+
+def topic_by_name(name: str) -> Topic:
+    """The contract's entry for a topic name; KeyError naming the known topics."""
+    for topic in TOPICS:
+        if topic.name == name:
+            return topic
+    raise KeyError(f"{name!r} is not a topic of the rig; known: {[t.name for t in TOPICS]}")
+
+
+def joint_position(msg: Any, name: str = PITCH_JOINT) -> float | None:
+    """Position of joint ``name`` in a sensor_msgs/JointState, or None.
+
+    None when the message does not name the joint, has no position for it, or the position
+    is not finite: a message without the joint is not a sample of it (no positional guess).
+    """
+    names: Sequence[str] = list(msg.name)
+    if name not in names:
+        return None
+    index = names.index(name)
+    position = msg.position
+    if index >= len(position):
+        return None
+    value = float(position[index])
+    return value if math.isfinite(value) else None

@@ -1,0 +1,78 @@
+"""Simulated wing node: the dynamic-stall plant with 49 pressure taps (docs/design.md §6).
+
+Reactive: every ``/pitch/state`` sample yields one ``/pressure/taps`` sample with the same
+stamp. The angle of attack is the state's ``alpha_true`` joint (simulation ground truth: true
+pitch + free-stream gust, from the simulated actuator) or, without it, the ``pitch`` joint.
+Deterministic for a seed whatever the speed. A state without a finite pitch gets no taps sample
+and is reported on ``/experiment/anomaly`` (``no_pitch``).
+"""
+
+import math
+import sys
+from typing import Any
+
+from pressure_scanner.tap_cloud import fill_cloud, point_fields
+from pressure_scanner.taps import load_taps
+from rig_runtime import Node, Parameter, run_node, stamp_to_ns
+from rig_runtime.interface import (
+    ALPHA_TRUE_JOINT,
+    PITCH_JOINT,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    joint_position,
+)
+
+from .plant import WingPlant
+from .wing_params import WingParams
+
+PARAMETERS = [
+    Parameter("seed", 0, "seed of stall switching, vortex strength, drift and noise", min=0),
+    Parameter("taps_file", "", "tap layout YAML (empty: the package's config/taps.yaml)"),
+    Parameter(
+        "taps_qos", "stream", "QoS of /pressure/taps", choices=("stream", "sensor", "default")
+    ),
+]
+
+
+class SimWing:
+    def __init__(self, node: Node) -> None:
+        p = node.params
+        self.node = node
+        taps = load_taps(p["taps_file"] or None)
+        self.plant = WingPlant(WingParams(), taps, seed=p["seed"])
+        self.fields = point_fields(node.new_message)
+        self.pub = node.create_publisher(PRESSURE_TAPS.type, PRESSURE_TAPS.name, p["taps_qos"])
+        node.create_subscription(
+            PITCH_STATE.type, PITCH_STATE.name, self.on_state, PITCH_STATE.qos, required=True
+        )
+        self.refused = 0
+        node.logger.info(
+            "simulated wing: %d taps, q = %.1f Pa", taps.n_taps, self.plant.dynamic_pressure_pa
+        )
+
+    def on_state(self, msg: Any) -> None:
+        # The plant's truth when the actuator gives it, else the measured pitch.
+        joint = ALPHA_TRUE_JOINT if ALPHA_TRUE_JOINT in msg.name else PITCH_JOINT
+        alpha = joint_position(msg, joint)
+        if alpha is None or not math.isfinite(alpha):
+            self.refused += 1
+            self.node.anomalies.point(
+                "no_pitch",
+                stamp_to_ns(msg.header.stamp),
+                detail="state without a finite pitch: no taps sample for it",
+            )
+            return
+        pressures = self.plant.step(alpha)
+        cloud = self.node.new_message(PRESSURE_TAPS.type)
+        cloud.header.stamp = msg.header.stamp
+        cloud.header.frame_id = "wing"
+        fill_cloud(cloud, self.node.new_message, self.plant.tap_xyz, pressures, self.fields)
+        self.pub.publish(cloud)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(SimWing, "sim_wing", PARAMETERS, argv, description=__doc__ or "")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

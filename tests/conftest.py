@@ -1,0 +1,17 @@
+"""The tests of this directory run the node graph (processes talking ROS 2 over Cyclone DDS),
+whole campaigns, the identification pipeline on a simulated campaign, or a colcon build: all
+are marked ``slow``. ``make test-fast`` (``pytest -m "not slow"``) leaves them out; ``make
+test`` runs them.
+"""
+
+from pathlib import Path
+
+import pytest
+
+HERE = Path(__file__).resolve().parent
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.path.resolve().is_relative_to(HERE):
+            item.add_marker(pytest.mark.slow)
