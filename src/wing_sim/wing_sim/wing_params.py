@@ -36,11 +36,11 @@ class WingParams(RigGeometry):
         alpha_stall_deg, alpha_reattach_deg: hazard mid-points (22°, 16.5°);
         switch_spread_deg: 0.5° (Gaussian-CDF ramp of the hazard); switch_time_s: τ = 0.015 s
         (hazard 1/τ far past the mid-point). The first design sketch suggested 0.7° and 0.2 s
-        (docs/design.md §6); with those the stall time at 19.9° varies so much from cycle to
-        cycle that even the period-averaged response explains only ~40% of a sine's variance
-        (relative error 0.6-0.8), far from the paper's rig, where PNLSS reaches 0.16-0.25 at the high level. 0.015 s / 0.5° keep the
-        randomness (clustering still sees it) but make the hysteresis loop repeatable enough
-        (0.015 s: the 1.6 Hz sine floor drops from 0.30 to 0.18).
+        (docs/design.md §6); with those the stall time at 19.9° varies so much from cycle to cycle
+        that even the period-averaged response explains only ~40% of a sine's variance (relative
+        error 0.6-0.8), far from the paper's rig, where PNLSS reaches 0.16-0.25 at the high level.
+        0.015 s / 0.5° keep the randomness (clustering still sees it) but make the hysteresis loop
+        repeatable enough (0.015 s: the 1.6 Hz sine floor drops from 0.30 to 0.18).
         separation_noise_std, separation_noise_time_s: Ornstein–Uhlenbeck noise on √f in
         separated flow (σ = 0.03 → C_l std ≈ 0.045 fully separated at 25°).
     Leading-edge vortex (Beddoes–Leishman vortex lift, Leishman & Beddoes, JAHS 34(3), 1989)
