@@ -25,6 +25,8 @@ _EXPORTS = {
     "StateSpaceDimensions": "models",
     "fit_pnlss": "pnlss",
     "fit_linear_ss": "subspace",
+    "ScanResult": "scan",
+    "scan_pnlss": "scan",
 }
 
 __all__ = [
@@ -34,6 +36,7 @@ __all__ = [
     "LinearStateSpace",
     "PNLSSModel",
     "PeriodicData",
+    "ScanResult",
     "StateSpaceDimensions",
     "cluster_periods",
     "estimate_bla",
@@ -42,6 +45,7 @@ __all__ = [
     "period_clusters",
     "predict_bla_sine",
     "relative_rms_error",
+    "scan_pnlss",
     "transient_periods",
 ]
 

@@ -19,6 +19,7 @@ dropped), like the measured data.
 """
 
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -417,10 +418,12 @@ def _fit_pnlss(
         for name in ("u", "y")
     )
     validation = PeriodicData(u_val, y_val, assembler.fs, lines)
+    weights = _level_weights(data, config.level_weighting)
+    val_weights = _level_weights(validation, config.level_weighting)
     lin = result.linear_level1
     assert lin is not None
     try:
-        start = _output_equation_start(data, lin, config, validation)
+        start = _output_equation_start(data, lin, config, validation, weights, val_weights)
         return fit_pnlss(
             data,
             lin,
@@ -429,10 +432,24 @@ def _fit_pnlss(
             max_iter=config.max_iter,
             validation=validation,
             initial_model=start,
+            record_weights=weights,
+            validation_weights=val_weights,
         )
     except (ValueError, np.linalg.LinAlgError) as exc:
         result.warnings.append(f"PNLSS ({label}) failed: {exc}")
         return None
+
+
+def _level_weights(data: PeriodicData, weighting: str) -> np.ndarray | None:
+    """Per-record weights of a one-record-per-level set (config.level_weighting)."""
+    if weighting == "none":
+        return None
+    if weighting != "relative":
+        raise ValueError(f"level_weighting must be 'relative' or 'none'; got {weighting!r}")
+    var = np.var(data.y, axis=0).T.reshape(-1)  # record r = m·P + p
+    if not np.all(var > 0):
+        raise ValueError("a level's output is constant: relative weighting is undefined")
+    return 1.0 / var
 
 
 def _output_equation_start(
@@ -440,6 +457,8 @@ def _output_equation_start(
     lin: LinearStateSpace,
     config: IdentificationConfig,
     validation: PeriodicData,
+    weights: np.ndarray | None = None,
+    val_weights: np.ndarray | None = None,
 ) -> PNLSSModel:
     """A PNLSS start whose output equation already holds the static nonlinearity.
 
@@ -454,7 +473,7 @@ def _output_equation_start(
 
     base = fit_pnlss(
         data, lin, degrees=config.degrees, structure=config.structure, max_iter=0,
-        validation=validation,
+        validation=validation, record_weights=weights, validation_weights=val_weights,
     )  # fmt: skip
     nx = base.nx
     un_all = (data.u - base.u_mean[0]) / base.u_scale[0]
@@ -467,8 +486,10 @@ def _output_equation_start(
             x = states[m * data.P + p]
             z = np.column_stack([x, un])
             eta = evaluate_monomials(z, base.exponents_output)
-            rows.append(np.column_stack([x, un, eta, np.ones(data.N)]))
-            targets.append((data.y[:, p, m] - base.y_mean[0]) / base.y_scale[0])
+            # Weighted least squares: record r's rows and target scaled by √w_r.
+            sw = 1.0 if weights is None else math.sqrt(weights[m * data.P + p])
+            rows.append(sw * np.column_stack([x, un, eta, np.ones(data.N)]))
+            targets.append(sw * (data.y[:, p, m] - base.y_mean[0]) / base.y_scale[0])
     R, t = np.vstack(rows), np.concatenate(targets)
     scale = np.maximum(np.sqrt(np.mean(R**2, axis=0)), 1e-12)
     theta = np.linalg.lstsq(R / scale, t, rcond=None)[0] / scale

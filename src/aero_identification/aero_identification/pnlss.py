@@ -37,6 +37,10 @@ from aero_identification.models import STATE_BOUND, LinearStateSpace, LMIteratio
 from aero_identification.monomials import STRUCTURES, check_degrees, structure_exponents
 from aero_identification.pnlss_kernels import jacobian_records, simulate_records
 
+# Where the monomials enter (Paduart et al. 2010, eq. 2): the state equation only (E), or the
+# state and the output equation (E and F).
+EQUATIONS = ("state", "state+output")
+
 try:  # a dependency of scikit-learn; optional here
     from threadpoolctl import ThreadpoolController
 except ImportError:  # pragma: no cover
@@ -192,9 +196,14 @@ def periodic_records(u: np.ndarray, n_transient: int) -> np.ndarray:
 
 
 def _initial_from_linear(
-    lin: LinearStateSpace, u_rec: np.ndarray, u_scale: np.ndarray, y_scale: np.ndarray
+    lin: LinearStateSpace,
+    u_rec: np.ndarray,
+    u_scale: np.ndarray,
+    y_scale: np.ndarray,
+    record_weights: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """Linear model in normalised coordinates, states scaled to unit RMS on the training input."""
+    """Linear model in normalised coordinates, states scaled to unit RMS on the training input
+    (each record weighted by `record_weights` when given)."""
     if not lin.is_stable():
         raise ValueError(
             "the initial linear model is unstable; fit it with fit_linear_ss (stable by "
@@ -206,7 +215,11 @@ def _initial_from_linear(
     D = lin.D * u_scale[None, :] / y_scale[:, None]
     nx = A.shape[0]
     x = linear_states(A, B, u_rec)  # their RMS on the training records
-    std = np.sqrt(np.mean(x.reshape(-1, nx) ** 2, axis=0))
+    if record_weights is None:
+        std = np.sqrt(np.mean(x.reshape(-1, nx) ** 2, axis=0))
+    else:
+        per_record = np.mean(x**2, axis=1)  # (R, nx)
+        std = np.sqrt(np.average(per_record, axis=0, weights=record_weights))
     std[~(std > 0)] = 1.0
     return {
         "A": A * std[None, :] / std[:, None],  # T⁻¹ A T with T = diag(std)
@@ -230,6 +243,9 @@ def fit_pnlss(
     lambda_init: float = 1.0,
     initial_model: PNLSSModel | None = None,
     solver: str = "normal",
+    equations: str = "state+output",
+    record_weights: np.ndarray | None = None,
+    validation_weights: np.ndarray | None = None,
 ) -> PNLSSModel:
     """Fit a PNLSS model to periodic data by Levenberg–Marquardt (module docstring).
 
@@ -259,6 +275,15 @@ def fit_pnlss(
             singular values below ~1e-5·s_max are dropped) or "qr" (Householder QR in place,
             then SVD of R; backward stable). On the Duffing benchmark both give the same fit
             to 12 digits.
+        equations: where the monomials enter: "state" (E only: x(t+1) = Ax + Bu + Eζ,
+            y = Cx + Du, the PNLSS toolbox's default structure) or "state+output" (E and F:
+            also y = Cx + Du + Fη). Ignored with `initial_model` (its terms are kept).
+        record_weights: one non-negative weight per training record (record r = m·P + p, as
+            the periods of data): the cost is Σ_r w_r ||e_r||², so records measured on
+            different scales (e.g. levels of one campaign) can count by their relative error.
+            None: every record weighs 1.
+        validation_weights: the same for the PeriodicData validation records (R_val = P·M of
+            `validation`), so the returned iterate is chosen by the same criterion.
 
     Returns:
         The PNLSSModel with `history_`, `cost_`, `cost_val_`.
@@ -272,6 +297,8 @@ def fit_pnlss(
         raise ValueError(f"max_iter must be >= 0; got {max_iter}")
     if solver not in ("qr", "normal"):
         raise ValueError(f"unknown solver {solver!r}; use 'qr' or 'normal'")
+    if equations not in EQUATIONS:
+        raise ValueError(f"unknown equations {equations!r}; choose one of {EQUATIONS}")
     if lin.nu != 1 or lin.ny != 1:
         raise ValueError(
             f"PeriodicData is SISO but the linear model has nu={lin.nu}, ny={lin.ny}; fit a "
@@ -279,6 +306,7 @@ def fit_pnlss(
         )
     N, P, M = data.u.shape
     R = P * M
+    sqrt_rw = _record_weights(record_weights, R, "record_weights")
     nx = lin.nx if initial_model is None else initial_model.nx
     nu = ny = 1
 
@@ -292,17 +320,17 @@ def fit_pnlss(
         if structure not in STRUCTURES:
             raise ValueError(f"unknown PNLSS structure {structure!r}; choose one of {STRUCTURES}")
         degrees_t = check_degrees(degrees)
-        u_mean = np.atleast_1d(np.mean(data.u))
-        y_mean = np.atleast_1d(np.mean(data.y))
-        u_scale = np.atleast_1d(np.std(data.u))
-        y_scale = np.atleast_1d(np.std(data.y))
+        # Record weights weigh the normalisation statistics too: a record that does not count
+        # in the cost does not move the model's coordinates either.
+        u_mean, u_scale = _weighted_stats(data.u, record_weights)
+        y_mean, y_scale = _weighted_stats(data.y, record_weights)
         if not (u_scale[0] > 0 and y_scale[0] > 0):
             raise ValueError(
                 "training input or output is constant (zero standard deviation); an "
                 "excited record is needed to fit a PNLSS model"
             )
         exp_state = structure_exponents(nx, nu, degrees_t, structure)
-        exp_output = exp_state.copy()
+        exp_output = exp_state.copy() if equations == "state+output" else exp_state[:0].copy()
     Kz, Ke = exp_state.shape[0], exp_output.shape[0]
 
     # Records: each period, with the tail of its own input prepended (periodic steady state).
@@ -340,7 +368,14 @@ def fit_pnlss(
         u_val_n = np.ascontiguousarray(((u_val - u_mean[0]) / u_scale[0])[None, :, None])
         y_val_tail = y_val[None, nt_val:]
 
-    # Weighting.
+    # Weighting: per record, then (optionally) per DFT bin.
+    sqrt_vw: np.ndarray | None = None
+    if validation_weights is not None:
+        if not isinstance(validation, PeriodicData):
+            raise ValueError("validation_weights need a PeriodicData validation set")
+        sqrt_vw = _record_weights(
+            validation_weights, validation.u.shape[1] * validation.u.shape[2], "validation_weights"
+        )
     sqrt_w: np.ndarray | None = None
     if isinstance(weighting, str):
         if weighting != "noise":
@@ -360,7 +395,9 @@ def fit_pnlss(
     if initial_model is not None:
         mats = {k: getattr(initial_model, k) for k in "ABCDEF"}
     else:
-        mats = _initial_from_linear(lin, u_rec, u_scale, y_scale)
+        mats = _initial_from_linear(
+            lin, u_rec, u_scale, y_scale, None if sqrt_rw is None else sqrt_rw**2
+        )
         mats["E"] = np.zeros((nx, Kz))
         mats["F"] = np.zeros((ny, Ke))
     mats["offset"] = np.zeros((ny, 1))
@@ -380,6 +417,8 @@ def fit_pnlss(
 
     def residual(y_sim: np.ndarray) -> np.ndarray:
         e = y_sim[:, nt:, :] - y_rec
+        if sqrt_rw is not None:
+            e = e * sqrt_rw[:, None, None]
         return e if sqrt_w is None else _pack_spectrum(e, sqrt_w)
 
     def train_cost(th: np.ndarray) -> float:
@@ -392,7 +431,8 @@ def fit_pnlss(
             return math.nan
         x0 = np.zeros((u_val_n.shape[0], nx))
         y = y_mean[0] + y_scale[0] * simulate(th, u_val_n, x0)[:, nt_val:, 0]
-        c = float(np.mean((y - y_val_tail) ** 2))
+        e2 = (y - y_val_tail) ** 2
+        c = float(np.mean(e2 if sqrt_vw is None else e2 * (sqrt_vw**2)[:, None]))
         return c if math.isfinite(c) else math.inf
 
     cost = train_cost(theta)
@@ -419,6 +459,8 @@ def fit_pnlss(
                 )  # fmt: skip
                 if not np.all(ok):
                     raise RuntimeError("internal error: an accepted model diverged in the Jacobian")
+                if sqrt_rw is not None:  # rows are record-major: record r's N·ny rows
+                    J *= np.repeat(sqrt_rw, N * ny)[:, None]
                 if sqrt_w is not None:
                     _pack_columns_in_place(J, R, N, ny, sqrt_w)
                 V, s, g, col_norm = lm_directions(J, n_par, rank_cap, solver)
@@ -499,6 +541,30 @@ def lm_directions(
     g = Ur.T @ Raug[:n_par, n_par]
     keep = min(rank_cap, int(np.sum(s > s[0] * J.shape[0] * eps)))
     return Vt.T[:, :keep], s[:keep], g[:keep], c
+
+
+def _weighted_stats(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation of (N, P, M) records, each record r = m·P + p weighted."""
+    if weights is None:
+        return np.atleast_1d(np.mean(x)), np.atleast_1d(np.std(x))
+    w = np.broadcast_to(
+        np.asarray(weights, dtype=float).reshape(x.shape[2], x.shape[1]).T[None], x.shape
+    )
+    mean = float(np.average(x, weights=w))
+    return np.atleast_1d(mean), np.atleast_1d(np.sqrt(np.average((x - mean) ** 2, weights=w)))
+
+
+def _record_weights(weights: np.ndarray | None, count: int, name: str) -> np.ndarray | None:
+    """√w of per-record weights, checked: `count` finite non-negative values, not all zero."""
+    if weights is None:
+        return None
+    w = np.asarray(weights, dtype=float).reshape(-1)
+    if w.size != count or not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+        raise ValueError(
+            f"{name} must be {count} finite non-negative weights (one per record), not all "
+            f"zero; got {np.asarray(weights).tolist()}"
+        )
+    return np.sqrt(w)
 
 
 def _pack_columns_in_place(J: np.ndarray, R: int, N: int, ny: int, sqrt_w: np.ndarray) -> None:

@@ -259,3 +259,46 @@ def test_periodic_validation_periods_choose_the_model_in_steady_state(duffing_ca
     with pytest.raises(ValueError, match="validation periods have"):
         short = PeriodicData(u=held_out.u[:-2], y=held_out.y[:-2], fs=1.0, excited_lines=LINES)
         fit_pnlss(c.data, c.lin, max_iter=1, validation=short)
+
+
+def test_state_equation_only_has_no_output_terms_and_fits_the_duffing_truth(duffing_case):
+    """The Duffing discretisation has its cubic term in the state equation only (E, F = 0)."""
+    c = duffing_case
+    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=30, equations="state",
+                      validation=(c.u_val, c.y_val))  # fmt: skip
+    assert model.F.shape == (1, 0) and model.exponents_output.shape[0] == 0
+    assert model.E.shape[1] == model.exponents_state.shape[0] > 0
+    noise_floor = rel_rms(c.y_val, c.y_val_true)
+    assert rel_rms(c.y_val, model.simulate(c.u_val)) <= 2 * noise_floor
+    restored = PNLSSModel.from_dict(json.loads(json.dumps(model.to_dict())))
+    assert np.array_equal(restored.simulate(c.u_val), model.simulate(c.u_val))
+
+
+def test_record_weights_unit_or_uniform_change_nothing(duffing_case):
+    c = duffing_case
+    base = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=8)
+    ones = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=8, record_weights=np.ones(P * M))
+    np.testing.assert_allclose(ones.E, base.E, rtol=1e-8, atol=1e-12)
+    assert ones.cost_ == pytest.approx(base.cost_, rel=1e-9)
+    scaled = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=8,
+                       record_weights=np.full(P * M, 7.0))  # fmt: skip
+    # The LM step is invariant to a common scale of the cost (only the reported cost scales).
+    np.testing.assert_allclose(scaled.E, base.E, rtol=1e-6, atol=1e-9)
+    assert scaled.cost_ == pytest.approx(7.0 * base.cost_, rel=1e-6)
+
+
+def test_a_record_with_zero_weight_does_not_move_the_fit(duffing_case):
+    """A corrupted record weighted 0 gives the fit of the clean records alone."""
+    c = duffing_case
+    clean = PeriodicData(c.data.u[:, :, :1], c.data.y[:, :, :1], c.data.fs, LINES)
+    y_bad = c.data.y.copy()
+    y_bad[:, :, 1] += 5.0 * np.std(c.data.y) * np.sin(np.arange(N) / 7.0)[:, None]
+    corrupted = PeriodicData(c.data.u, y_bad, c.data.fs, LINES)
+    w = np.r_[np.ones(P), np.zeros(P)]  # record r = m·P + p: realization 1 weighs 0
+    a = fit_pnlss(clean, c.lin, degrees=(2, 3), max_iter=6)
+    b = fit_pnlss(corrupted, c.lin, degrees=(2, 3), max_iter=6, record_weights=w)
+    np.testing.assert_allclose(b.E, a.E, rtol=1e-5, atol=1e-8)
+    with pytest.raises(ValueError, match="record_weights must be 6"):
+        fit_pnlss(corrupted, c.lin, max_iter=1, record_weights=np.ones(3))
+    with pytest.raises(ValueError, match="unknown equations"):
+        fit_pnlss(corrupted, c.lin, max_iter=1, equations="output")

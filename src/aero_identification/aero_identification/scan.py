@@ -1,0 +1,399 @@
+"""Cross-validated PNLSS structure scan: every candidate fitted, the simplest adequate one kept.
+
+The paper chooses its model complexity by "cross-validation based model order scanning (using
+50 Levenberg–Marquardt iterations)" [PitchingWing]. :func:`scan_pnlss` fits one PNLSS model
+per candidate structure (state order nx, monomial degrees, the equations the monomials enter,
+the monomial structure), each from the linear model of its order, and scores it on held-out
+periodic data.
+
+Score and selection rule (docs/design.md §7.6):
+
+- Validation error of a candidate: for every validation period r, the relative RMS error
+  e_r = rms(y_r − ŷ) / std(y_r) of the steady-state simulation ŷ (the input is periodic, so ŷ is
+  the same for every period of a realization; the periods differ by noise and by
+  cycle-to-cycle variation). The candidate's error is E = √(mean_r w_r e_r² / mean_r w_r)
+  (weights: `validation_weights`, default 1). Its standard error SE is the larger of two
+  resolutions: the spread of the w_r e_r² over the periods (standard error of their mean,
+  delta method for the square root), and what the excitation can resolve at all: the input
+  is periodic, so the model-error part of the residual is fixed by the 2·F·M real numbers of
+  its spectrum at the F excited lines of the M realizations, and an error estimated from n
+  such values has a relative standard error √(2/n) in E² (χ² with n degrees of freedom), i.e.
+  SE ≥ E / (2√(F·M)). Without that floor, a validation set of a few periods of one
+  realization would claim a precision its noise does not have, and a candidate would win
+  only because its best LM iterate was chosen on the same data (a linear system otherwise
+  "prefers" a cubic model by 3 %).
+- One-standard-error rule (Breiman et al. 1984 §3.4.3; Hastie, Tibshirani & Friedman 2009
+  §7.10): among the candidates whose E is within the best candidate's E + SE, keep the one with
+  the fewest parameters (ties: the lower E). A richer model must beat a simpler one by more
+  than the data can resolve before it is preferred: on real data the richer structure tends
+  to extrapolate worse (issue 12: output-equation terms on the electronic Duffing benchmark).
+
+Parallel: the candidates are independent fits. With `client` (a ``dask.distributed.Client``,
+e.g. of a cluster started with ``dask scheduler`` / ``dask worker``) they run on its workers;
+otherwise, with ``workers > 1`` (default: every core), on a local Dask cluster of single-
+threaded worker processes (numba kernels load from their on-disk cache once per process);
+``workers=1`` runs them one after the other in this process.
+"""
+
+import math
+import os
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .data import PeriodicData
+from .models import LinearStateSpace, PNLSSModel
+from .monomials import STRUCTURES, check_degrees
+from .pnlss import EQUATIONS, fit_pnlss
+
+__all__ = ["Candidate", "ScanResult", "ScanRow", "candidate_grid", "scan_pnlss"]
+
+LinearSource = Callable[[int], LinearStateSpace] | Mapping[int, LinearStateSpace] | None
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One PNLSS structure of the scan."""
+
+    nx: int
+    degrees: tuple[int, ...]
+    equations: str
+    structure: str = "full"
+
+
+@dataclass(frozen=True)
+class ScanRow:
+    """One row of the scan table (errors are relative RMS, module docstring)."""
+
+    nx: int
+    degrees: tuple[int, ...]
+    equations: str
+    structure: str
+    n_params: int
+    validation_error: float
+    validation_se: float
+    training_error: float
+    fit_seconds: float
+    status: str  # "ok" or what went wrong
+
+    def as_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["degrees"] = list(self.degrees)
+        return d
+
+
+@dataclass
+class ScanResult:
+    """The scan's table, its models and the selected candidate."""
+
+    rows: list[ScanRow]
+    models: list[PNLSSModel | None]
+    best_index: int
+    rule: str
+    seconds: float = 0.0
+    workers: str = ""
+    selected_by: list[str] = field(default_factory=list)
+
+    @property
+    def best(self) -> PNLSSModel:
+        model = self.models[self.best_index]
+        assert model is not None  # the selection only keeps fitted candidates
+        return model
+
+    @property
+    def best_row(self) -> ScanRow:
+        return self.rows[self.best_index]
+
+    @property
+    def table(self) -> list[dict[str, Any]]:
+        """One dict per candidate, in scan order, with ``selected`` marking the kept one."""
+        return [{**r.as_dict(), "selected": i == self.best_index} for i, r in enumerate(self.rows)]
+
+    def to_markdown(self) -> str:
+        head = (
+            "| nx | degrees | equations | structure | parameters | validation error | SE "
+            "| training error | fit s | status |\n|---|---|---|---|---|---|---|---|---|---|\n"
+        )
+        lines = []
+        for i, r in enumerate(self.rows):
+            mark = " **(selected)**" if i == self.best_index else ""
+            lines.append(
+                f"| {r.nx} | {','.join(map(str, r.degrees))} | {r.equations} | {r.structure} "
+                f"| {r.n_params} | {_fmt(r.validation_error)}{mark} | {_fmt(r.validation_se)} "
+                f"| {_fmt(r.training_error)} | {r.fit_seconds:.1f} | {r.status} |"
+            )
+        return head + "\n".join(lines) + f"\n\nRule: {self.rule}\n"
+
+    def to_csv(self) -> str:
+        keys = [*ScanRow.__dataclass_fields__, "selected"]
+        out = [",".join(keys)]
+        for row in self.table:
+            values = [" ".join(map(str, row[k])) if k == "degrees" else str(row[k]) for k in keys]
+            out.append(",".join(values))
+        return "\n".join(out) + "\n"
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.4g}" if math.isfinite(x) else "—"
+
+
+def candidate_grid(
+    nx: Iterable[int] = (1, 2, 3),
+    degrees: Iterable[Sequence[int]] = ((2,), (2, 3), (2, 3, 4, 5)),
+    equations: Iterable[str] = EQUATIONS,
+    structures: Iterable[str] = ("full",),
+) -> list[Candidate]:
+    """Every combination, checked (orders ≥ 1, valid degrees, equations and structures)."""
+    out = []
+    for n in nx:
+        if int(n) < 1:
+            raise ValueError(f"state orders must be >= 1; got {n}")
+        for d in degrees:
+            for eq in equations:
+                if eq not in EQUATIONS:
+                    raise ValueError(f"unknown equations {eq!r}; choose from {EQUATIONS}")
+                for s in structures:
+                    if s not in STRUCTURES:
+                        raise ValueError(f"unknown structure {s!r}; choose from {STRUCTURES}")
+                    out.append(Candidate(int(n), check_degrees(d), eq, s))
+    if not out:
+        raise ValueError("the scan grid is empty")
+    return out
+
+
+def scan_pnlss(
+    data: PeriodicData,
+    validation: PeriodicData,
+    nx: Iterable[int] = (1, 2, 3),
+    degrees: Iterable[Sequence[int]] = ((2,), (2, 3), (2, 3, 4, 5)),
+    equations: Iterable[str] = EQUATIONS,
+    structures: Iterable[str] = ("full",),
+    max_iter: int = 50,
+    client: Any = None,
+    *,
+    linear: LinearSource = None,
+    workers: int | None = None,
+    record_weights: np.ndarray | None = None,
+    validation_weights: np.ndarray | None = None,
+) -> ScanResult:
+    """Fit every candidate PNLSS structure and select one by cross-validation (module docs).
+
+    Args:
+        data: training periods (N, P, M).
+        validation: held-out periods (same N): each LM fit keeps its best iterate on them, and
+            the scan scores and selects on them.
+        nx, degrees, equations, structures: the grid (every combination is a candidate).
+        max_iter: Levenberg–Marquardt iterations per candidate (the paper's scan: 50).
+        client: a ``dask.distributed.Client``; None: local (see `workers`).
+        linear: the initial linear model of each order: a mapping or a callable nx → model;
+            None: the frequency-domain subspace model (fit_linear_ss) of the robust BLA of
+            `data` at that order, with the data's operating point.
+        workers: local worker processes when no client is given (default: every core; 1: in
+            this process, one after the other).
+        record_weights, validation_weights: per-period weights of the training cost and of the
+            validation score (fit_pnlss); e.g. 1/var(y) per level for records of several levels.
+
+    Returns:
+        A ScanResult: `.best` (the selected PNLSSModel, with `.simulate(u)`), `.table`,
+        `.rows`, `.models`, `.rule`; `to_markdown()` / `to_csv()` for the report.
+
+    Raises:
+        ValueError: for an empty or invalid grid, mismatched data, or when no candidate could
+            be fitted (every row's status says why).
+    """
+    if validation.u.shape[0] != data.u.shape[0]:
+        raise ValueError(
+            f"validation periods have {validation.u.shape[0]} samples; training periods have "
+            f"{data.u.shape[0]}"
+        )
+    if max_iter < 1:
+        raise ValueError(f"max_iter must be >= 1; got {max_iter}")
+    grid = candidate_grid(nx, degrees, equations, structures)
+    linears = _linear_models(data, sorted({c.nx for c in grid}), linear)
+    jobs = [(c, linears[c.nx]) for c in grid]
+    options = {
+        "max_iter": int(max_iter),
+        "record_weights": record_weights,
+        "validation_weights": validation_weights,
+    }
+    t0 = time.perf_counter()
+    results, where = _run(jobs, data, validation, options, client, workers)
+    rows = [r for r, _ in results]
+    models = [m for _, m in results]
+    best, why = select_one_se(rows)
+    return ScanResult(
+        rows=rows,
+        models=models,
+        best_index=best,
+        rule=why,
+        seconds=time.perf_counter() - t0,
+        workers=where,
+    )
+
+
+def select_one_se(rows: Sequence[ScanRow]) -> tuple[int, str]:
+    """Index of the kept candidate by the one-standard-error rule, and the rule as text."""
+    ok = [i for i, r in enumerate(rows) if r.status == "ok" and math.isfinite(r.validation_error)]
+    if not ok:
+        reasons = "; ".join(f"nx={r.nx} {r.degrees} {r.equations}: {r.status}" for r in rows)
+        raise ValueError(f"no PNLSS candidate could be fitted: {reasons}")
+    i_min = min(ok, key=lambda i: rows[i].validation_error)
+    bound = rows[i_min].validation_error + rows[i_min].validation_se
+    within = [i for i in ok if rows[i].validation_error <= bound]
+    best = min(within, key=lambda i: (rows[i].n_params, rows[i].validation_error))
+    why = (
+        f"one-standard-error rule: the lowest validation error is "
+        f"{rows[i_min].validation_error:.4g} ± {rows[i_min].validation_se:.4g} "
+        f"(nx={rows[i_min].nx}, degrees {list(rows[i_min].degrees)}, "
+        f"{rows[i_min].equations}); of the {len(within)} "
+        f"candidate(s) within {bound:.4g}, the one with the fewest parameters is kept "
+        f"({rows[best].n_params} parameters)."
+    )
+    return best, why
+
+
+def _linear_models(
+    data: PeriodicData, orders: list[int], linear: LinearSource
+) -> dict[int, LinearStateSpace]:
+    if linear is None:
+        from .bla import estimate_bla
+        from .subspace import fit_linear_ss
+
+        bla = estimate_bla(data, method="auto")
+        u0, y0 = float(np.mean(data.u)), float(np.mean(data.y))
+        return {n: fit_linear_ss(bla, nx=n).with_operating_point(u0, y0) for n in orders}
+    if callable(linear):
+        return {n: linear(n) for n in orders}
+    missing = [n for n in orders if n not in linear]
+    if missing:
+        raise ValueError(f"no initial linear model of order(s) {missing} given")
+    return {n: linear[n] for n in orders}
+
+
+def _run(
+    jobs: list[tuple[Candidate, LinearStateSpace]],
+    data: PeriodicData,
+    validation: PeriodicData,
+    options: dict[str, Any],
+    client: Any,
+    workers: int | None,
+) -> tuple[list[tuple[ScanRow, PNLSSModel | None]], str]:
+    if client is None:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        if n < 1:
+            raise ValueError(f"workers must be >= 1; got {n}")
+        if n == 1 or len(jobs) == 1:
+            return [fit_candidate(c, lin, data, validation, options) for c, lin in jobs], "serial"
+        from dask.distributed import Client, LocalCluster
+
+        with (
+            LocalCluster(
+                n_workers=min(n, len(jobs)),
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                host="127.0.0.1",
+            ) as cluster,
+            Client(cluster) as local,
+        ):
+            return _on_client(local, jobs, data, validation, options), (
+                f"local Dask cluster, {min(n, len(jobs))} worker processes"
+            )
+    return _on_client(client, jobs, data, validation, options), f"Dask client {client}"
+
+
+def _on_client(
+    client: Any,
+    jobs: list[tuple[Candidate, LinearStateSpace]],
+    data: PeriodicData,
+    validation: PeriodicData,
+    options: dict[str, Any],
+) -> list[tuple[ScanRow, PNLSSModel | None]]:
+    # Data once per worker, not once per task; the largest candidates first, so the last
+    # task to finish is a small one.
+    data_f, val_f = client.scatter([data, validation], broadcast=True)
+    order = sorted(range(len(jobs)), key=lambda i: -_size(jobs[i][0]))
+    futures = {
+        i: client.submit(fit_candidate, jobs[i][0], jobs[i][1], data_f, val_f, options, pure=False)
+        for i in order
+    }
+    return [futures[i].result() for i in range(len(jobs))]
+
+
+def _size(c: Candidate) -> int:
+    return c.nx * (c.nx + 1) * sum(c.degrees) * (2 if c.equations == "state+output" else 1)
+
+
+def fit_candidate(
+    candidate: Candidate,
+    lin: LinearStateSpace,
+    data: PeriodicData,
+    validation: PeriodicData,
+    options: Mapping[str, Any],
+) -> tuple[ScanRow, PNLSSModel | None]:
+    """Fit one candidate and score it; a failed fit is a row with its reason, never a crash."""
+    t0 = time.perf_counter()
+    try:
+        model = fit_pnlss(
+            data,
+            lin,
+            degrees=candidate.degrees,
+            structure=candidate.structure,
+            equations=candidate.equations,
+            max_iter=int(options.get("max_iter", 50)),
+            validation=validation,
+            record_weights=options.get("record_weights"),
+            validation_weights=options.get("validation_weights"),
+        )
+        val, se = periodic_error(model, validation, options.get("validation_weights"))
+        train, _ = periodic_error(model, data, options.get("record_weights"))
+        status = "ok" if math.isfinite(val) else "diverges on the validation data"
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
+        model, val, se, train, status = None, math.nan, math.nan, math.nan, f"failed: {exc}"
+    n_params = _n_params(model) if model is not None else 0
+    row = ScanRow(
+        candidate.nx,
+        candidate.degrees,
+        candidate.equations,
+        candidate.structure,
+        n_params,
+        val,
+        se,
+        train,
+        time.perf_counter() - t0,
+        status,
+    )
+    return row, model
+
+
+def _n_params(model: PNLSSModel) -> int:
+    offset = model.C.shape[0]  # the fitted output offset
+    return int(sum(getattr(model, k).size for k in "ABCDEF") + offset)
+
+
+def periodic_error(
+    model: PNLSSModel, data: PeriodicData, weights: np.ndarray | None = None
+) -> tuple[float, float]:
+    """Relative RMS error over steady-state periods and its standard error (module docs)."""
+    N, P, M = data.u.shape
+    e2 = np.empty((M, P))
+    for m in range(M):
+        u_period = data.u[:, :, m].mean(axis=1)  # the periods of a realization share the input
+        y_hat = model.simulate(np.tile(u_period, 2))[N:]
+        if not np.all(np.isfinite(y_hat)):
+            return math.inf, math.nan
+        for p in range(P):
+            y = data.y[:, p, m]
+            e2[m, p] = np.mean((y - y_hat) ** 2) / np.var(y)
+    w = np.ones(M * P) if weights is None else np.asarray(weights, float).reshape(-1)
+    x = e2.reshape(-1) * w / np.mean(w)  # record r = m·P + p
+    mse = float(np.mean(x))
+    se_mse = float(np.std(x, ddof=1) / math.sqrt(x.size)) if x.size > 1 else 0.0
+    err = math.sqrt(mse)
+    if err == 0:
+        return 0.0, 0.0
+    floor = err / (2 * math.sqrt(max(1, data.excited_lines.size) * M))  # module docstring
+    return err, max(se_mse / (2 * err), floor)

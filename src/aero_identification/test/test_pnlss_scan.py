@@ -1,0 +1,115 @@
+"""The cross-validated PNLSS structure scan on systems whose structure is known."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aero_identification import scan_pnlss
+from aero_identification.data import PeriodicData
+from aero_identification.scan import ScanRow, candidate_grid, select_one_se
+from aero_identification.subspace import fit_linear_ss
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_pnlss_duffing import LINES, N, P, make_case, robust_bla  # the Duffing cases
+
+
+def _split(k3: float, seed: int) -> tuple[PeriodicData, PeriodicData, dict]:
+    """Realization 0 for training, 1 for validation; linear models of every order from the
+    BLA of both (the scan's default would use the training data alone, which has M = 1)."""
+    case = make_case(k3=k3, seed=seed)
+    d = case.data
+    train = PeriodicData(d.u[:, :, :1], d.y[:, :, :1], d.fs, LINES)
+    val = PeriodicData(d.u[:, :, 1:], d.y[:, :, 1:], d.fs, LINES)
+    bla = robust_bla(d)
+    u0, y0 = float(d.u.mean()), float(d.y.mean())
+    linear = {n: fit_linear_ss(bla, nx=n).with_operating_point(u0, y0) for n in (1, 2, 3)}
+    return train, val, linear
+
+
+GRID = {
+    "nx": (1, 2, 3),
+    "degrees": ((2,), (2, 3)),
+    "equations": ("state", "state+output"),
+}
+
+
+@pytest.fixture(scope="module")
+def duffing_scan():
+    train, val, linear = _split(k3=1.0, seed=1)
+    return scan_pnlss(train, val, **GRID, max_iter=25, linear=linear, workers=1)
+
+
+def test_scan_selects_the_duffing_structure(duffing_scan) -> None:
+    """Truth: nx = 2, a cubic term in the state equation only (test_pnlss_duffing.duffing)."""
+    best = duffing_scan.best_row
+    assert best.equations == "state", duffing_scan.to_markdown()
+    assert 3 in best.degrees, duffing_scan.to_markdown()
+    assert abs(best.nx - 2) <= 1, duffing_scan.to_markdown()
+    rows = duffing_scan.table
+    assert len(rows) == 12 and sum(r["selected"] for r in rows) == 1
+    quadratic = [r for r in duffing_scan.rows if r.degrees == (2,) and r.nx == 2]
+    assert all(r.validation_error > 2 * best.validation_error for r in quadratic)
+    y = duffing_scan.best.simulate(np.zeros(8) + 0.3)
+    assert y.shape == (8,) and np.all(np.isfinite(y))
+
+
+def test_scan_table_and_report_hold_every_candidate(duffing_scan) -> None:
+    md, csv = duffing_scan.to_markdown(), duffing_scan.to_csv()
+    assert md.count("\n| ") == 12 and "(selected)" in md and "one-standard-error" in md
+    assert csv.count("\n") == 13 and csv.startswith("nx,degrees,equations")
+    for row in duffing_scan.rows:
+        assert row.status == "ok" and row.n_params > 0 and row.fit_seconds > 0
+
+
+def test_scan_on_a_linear_system_keeps_the_smallest_model() -> None:
+    train, val, linear = _split(k3=0.0, seed=2)
+    result = scan_pnlss(
+        train, val, nx=(1, 2), degrees=((2,), (2, 3)), equations=("state",), max_iter=10,
+        linear=linear, workers=1,
+    )  # fmt: skip
+    sizes = [r.n_params for r in result.rows if r.nx == result.best_row.nx]
+    assert result.best_row.n_params == min(sizes)
+    assert result.best_row.degrees == (2,)
+
+
+def test_one_standard_error_rule() -> None:
+    def row(n: int, err: float, se: float, status: str = "ok") -> ScanRow:
+        return ScanRow(1, (2,), "state", "full", n, err, se, err, 0.1, status)
+
+    # The richest model is best, but the small one is within one SE of it.
+    assert select_one_se([row(10, 0.105, 0.01), row(50, 0.1, 0.01)])[0] == 0
+    # Beyond one SE: the richer model wins.
+    assert select_one_se([row(10, 0.2, 0.01), row(50, 0.1, 0.01)])[0] == 1
+    # Failed candidates are never selected; all failed: a clear error.
+    assert select_one_se([row(5, float("nan"), 0, "failed: x"), row(9, 0.3, 0.01)])[0] == 1
+    with pytest.raises(ValueError, match="no PNLSS candidate could be fitted"):
+        select_one_se([row(5, float("nan"), 0, "failed: diverged")])
+
+
+def test_grid_is_checked() -> None:
+    assert len(candidate_grid()) == 3 * 3 * 2
+    with pytest.raises(ValueError, match="unknown equations"):
+        candidate_grid(equations=("output",))
+    with pytest.raises(ValueError, match="state orders"):
+        candidate_grid(nx=(0,))
+
+
+@pytest.mark.slow  # starts a local Dask cluster (worker processes)
+def test_dask_cluster_selects_the_same_model_as_the_serial_scan() -> None:
+    from dask.distributed import Client, LocalCluster
+
+    train, val, linear = _split(k3=1.0, seed=1)
+    grid = {"nx": (2,), "degrees": ((2,), (2, 3)), "equations": ("state", "state+output")}
+    serial = scan_pnlss(train, val, **grid, max_iter=10, linear=linear, workers=1)
+    with (
+        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):
+        remote = scan_pnlss(train, val, **grid, max_iter=10, linear=linear, client=client)
+    assert remote.best_index == serial.best_index
+    for a, b in zip(remote.rows, serial.rows, strict=True):
+        assert a.validation_error == pytest.approx(b.validation_error, rel=1e-9)
+    np.testing.assert_allclose(remote.best.E, serial.best.E, rtol=1e-9, atol=1e-12)
+    assert N == 1024 and P == 3  # the shared case's layout, as _split assumes
