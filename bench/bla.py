@@ -26,7 +26,7 @@ SIGMA = 0.01
 
 def odd_multisine_lines(rng: np.random.Generator, max_line: int) -> np.ndarray:
     """Odd lines up to max_line with one randomly skipped per group of 4 (detection lines)."""
-    odd = np.arange(1, max_line + 1, 2)
+    odd: np.ndarray = np.arange(1, max_line + 1, 2)
     odd = odd[: odd.size // 4 * 4].reshape(-1, 4)
     keep = np.ones(odd.shape, dtype=bool)
     keep[np.arange(odd.shape[0]), rng.integers(0, 4, odd.shape[0])] = False

@@ -148,7 +148,7 @@ def measure(run: Path, reference: Path | None) -> dict[str, Any]:
         with AnyReader([run / "bag"]) as reader:
             conns = [c for c in reader.connections if c.topic in (*STREAM, EXPERIMENT_PLAN.name)]
             for conn, _, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
+                msg: Any = reader.deserialize(raw, conn.msgtype)
                 if conn.topic == EXPERIMENT_PLAN.name:
                     plan = json.loads(msg.data)
                 else:

@@ -63,7 +63,7 @@ def _sample_processes(
 
 def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
     graph = load_graph(_config("sim.yaml"))
-    overrides = {
+    overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": plan, "real_time_factor": 0.0},
         "recorder": {"output": str(run_dir / "bag")},
         "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
@@ -92,7 +92,8 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
         stamps: dict[str, set[int]] = {PITCH_COMMAND.name: set(), WING_COEFFICIENTS.name: set()}
         conns = [c for c in reader.connections if c.topic in stamps]
         for conn, _, raw in reader.messages(connections=conns):
-            stamps[conn.topic].add(stamp_to_ns(reader.deserialize(raw, conn.msgtype).header.stamp))
+            msg: Any = reader.deserialize(raw, conn.msgtype)
+            stamps[conn.topic].add(stamp_to_ns(msg.header.stamp))
     models = json.loads((run_dir / "models.json").read_text())
     status_refits = []
     refit_memory = []

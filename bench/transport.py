@@ -16,6 +16,7 @@ import json
 import subprocess
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -75,7 +76,7 @@ def main() -> int:
         flood = node.create_publisher(CLOUD, "/bench/flood", qos="stream")
         sent_at: dict[int, int] = {}
         rtts: list[float] = []
-        latest: dict[str, object] = {}
+        latest: dict[str, Any] = {}
 
         def on_pong(msg: object) -> None:
             seq = int(np.frombuffer(np.asarray(msg.data, np.uint8).tobytes(), np.float32)[3])  # type: ignore[attr-defined]
@@ -89,7 +90,7 @@ def main() -> int:
         node.create_subscription(CLOUD, "/bench/pong", on_pong, qos="stream")
         node.create_subscription(RESULT, "/bench/result", on_result, qos="latched")
         if not node.spin_until(
-            lambda: ping.subscription_count() and flood.subscription_count() and latest, 30
+            lambda: bool(ping.subscription_count() and flood.subscription_count() and latest), 30
         ):
             raise RuntimeError("echo process did not appear on the DDS domain within 30 s")
 
@@ -99,7 +100,11 @@ def main() -> int:
         start = time.perf_counter()
         for k in range(n_ping):
             target = start + k * period
-            node.spin_until(lambda target=target: time.perf_counter() >= target, 1.0)
+
+            def due(target: float = target) -> bool:
+                return time.perf_counter() >= target
+
+            node.spin_until(due, 1.0)
             msg = make_message(node, "taps", k)
             sent_at[k] = time.perf_counter_ns()
             ping.publish(msg)
@@ -117,7 +122,7 @@ def main() -> int:
         node.spin_until(lambda: False, 0.5)  # let the last report arrive
         t_send = time.perf_counter() - t_start
         received = int(latest.get("count", 0))
-        span_s = (int(latest["last"]) - int(latest["first"])) / 1e9 if received > 1 else t_send  # type: ignore[arg-type]
+        span_s = (int(latest["last"]) - int(latest["first"])) / 1e9 if received > 1 else t_send
         node.close()
     finally:
         echo.send_signal(2)

@@ -5,6 +5,7 @@ from typing import Any
 
 import numpy as np
 
+from rig_runtime.dds_backend import DdsSubscription
 from rig_runtime.interface import DIAGNOSTICS
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import Node
@@ -16,13 +17,15 @@ class Observer:
     def __init__(self, topics: dict[str, tuple[str, str]]) -> None:
         self.node = Node("test_observer", argv=[], backend="dds")
         self.data: dict[str, list[tuple[int, Any]]] = defaultdict(list)
-        self.subs = []
+        self.subs: list[DdsSubscription] = []
         for topic, (type_name, qos) in topics.items():
-            self.subs.append(
-                self.node.create_subscription(
-                    type_name, topic, lambda m, t=topic: self._store(t, m), qos=qos
-                )
-            )
+
+            def store(msg: Any, topic: str = topic) -> None:
+                self._store(topic, msg)
+
+            sub = self.node.create_subscription(type_name, topic, store, qos=qos)
+            assert isinstance(sub, DdsSubscription)  # backend="dds"
+            self.subs.append(sub)
 
     def _store(self, topic: str, msg: Any) -> None:
         header = getattr(msg, "header", None)

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -98,7 +99,7 @@ def _stream_stamps(bag: Path) -> dict[str, list[int]]:
     with AnyReader([bag]) as reader:
         conns = [c for c in reader.connections if c.topic in STREAM_TOPICS]
         for conn, _, raw in reader.messages(connections=conns):
-            msg = reader.deserialize(raw, conn.msgtype)
+            msg: Any = reader.deserialize(raw, conn.msgtype)
             stamps.setdefault(conn.topic, []).append(stamp_to_ns(msg.header.stamp))
     return stamps
 
@@ -157,12 +158,13 @@ def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
             in (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name)
         ]
         for conn, _, raw in reader.messages(connections=conns):
-            msg = reader.deserialize(raw, conn.msgtype)
+            msg: Any = reader.deserialize(raw, conn.msgtype)
             stamps.setdefault(conn.topic, []).append(stamp_to_ns(msg.header.stamp))
         plan_conn = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
-        plan = json.loads(
-            reader.deserialize(next(reader.messages(plan_conn))[2], "std_msgs/msg/String").data
+        plan_msg: Any = reader.deserialize(
+            next(reader.messages(plan_conn))[2], "std_msgs/msg/String"
         )
+        plan = json.loads(plan_msg.data)
     commands = np.array(stamps[PITCH_COMMAND.name])
     assert len(commands) == plan["total_samples"]
     assert len(np.unique(commands)) == len(commands)
@@ -175,7 +177,7 @@ def test_rrd_holds_logged_entities(campaign) -> None:
     run, _ = campaign
     rrd = run / "campaign.rrd"
     assert rrd.exists() and rrd.stat().st_size > 10_000
-    from rerun.chunk import RrdReader  # type: ignore[import-not-found]
+    from rerun.chunk import RrdReader
 
     paths = {str(chunk.entity_path) for chunk in RrdReader(rrd).stream().to_chunks()}
     assert any(p.startswith("/series/") for p in paths)

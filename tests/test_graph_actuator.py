@@ -75,6 +75,7 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
     pos = np.array([m.position[0] for _, m in observer.data[PITCH_STATE.name][:total]])
     seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 1)
     N = seg.samples_per_period
+    assert N is not None  # every multisine segment has it
     lines = plan.levels[0].realizations[0].excited_lines[:6]
     U = np.fft.rfft(cmd[seg.start_k : seg.start_k + N])[lines]
     Y = np.fft.rfft(pos[seg.start_k : seg.start_k + N])[lines]

@@ -154,9 +154,9 @@ def test_missing_taps_are_excluded_or_invalidate_the_sample(
     assert diag["invalid"] == "0"
 
     # k = 2, 3: the front half, then the rear half of the upper surface NaN -> no number.
-    for k, nan_taps in ((2, taps.upper[:12]), (3, taps.upper[12:])):
+    for k, half in ((2, taps.upper[:12]), (3, taps.upper[12:])):
         p = wing_pressures.copy()
-        p[nan_taps] = np.nan
+        p[half] = np.nan
         client.publish_state(k, alpha)
         client.publish_taps(k, p)
     assert client.wait_outputs(4), procs.log("lift")

@@ -78,9 +78,12 @@ def test_scanner_node_publishes_plant_pressures_counts_faults_and_tares(
                 name="scanner",
             )
             port_re = re.compile(r"scanner frames on UDP port (\d+)")
-            wait_for(lambda: port_re.search(procs.log("scanner")) or node.poll() is not None, 30)
-            assert port_re.search(procs.log("scanner")), procs.log("scanner")
-            port = int(port_re.search(procs.log("scanner")).group(1))
+            wait_for(
+                lambda: bool(port_re.search(procs.log("scanner"))) or node.poll() is not None, 30
+            )
+            found = port_re.search(procs.log("scanner"))
+            assert found, procs.log("scanner")
+            port = int(found.group(1))
             ready = client.node.spin_until(
                 lambda: (
                     client.tare.subscription_count() > 0

@@ -192,6 +192,7 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
         ident._start_refit(False, "second")
         assert ident.executor is not None
         (pid,) = [p.pid for p in ident.executor._processes.values()]
+        assert pid is not None  # a started worker
         os.kill(pid, signal.SIGKILL)
         assert wait_for(lambda: ident.future is not None and ident.future.done(), 60)
         ident._collect()
@@ -235,7 +236,7 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
         assert not ident.final_done and ident.pending and ident.pending[-1][1]
         ident.on_timer()  # starts the final identification again, with the anomaly
         assert ident.future is not None
-        assert wait_for(lambda: ident.future.done(), 120)
+        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
         ident._collect()
         assert ident.final_done
         quality = ident.last_summary["data_quality"]
@@ -243,3 +244,25 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
     finally:
         ident.close()
         node.close()
+
+
+def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
+    """config.scan: the all-levels PNLSS is the scan's choice, and the report holds the scan."""
+    from aero_identification.pipeline import write_report
+
+    asm = _assemble(campaign)
+    config = IdentificationConfig(
+        scan=True, scan_nx=(1, 2), scan_degrees=((2,), (2, 3)), scan_max_iter=10, scan_workers=1
+    )
+    result = identify(asm, config, final=True)
+    assert result.scan is not None and len(result.scan.rows) == 2 * 2 * 2
+    assert result.pnlss_all is result.scan.best
+    assert ("PNLSS", "high", 1.0) in result.errors_all
+    interim = identify(asm, config)  # online refits keep the single structure
+    assert interim.scan is None and interim.pnlss_all is not None
+    written = write_report(result, asm, tmp_path)
+    assert (tmp_path / "pnlss_scan.md").read_text().count("(selected)") == 1
+    assert (tmp_path / "pnlss_scan.csv").read_text().count("\n") == 9
+    assert written["pnlss_scan_plot"].stat().st_size > 10_000
+    payload = json.loads((tmp_path / "models.json").read_text())
+    assert sum(row["selected"] for row in payload["pnlss_scan"]["table"]) == 1

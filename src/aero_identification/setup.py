@@ -22,6 +22,8 @@ setup(
         "scikit-learn>=1.3",
         "numba>=0.59",
         "matplotlib>=3.7",
+        "h5py>=3.8",
+        "dask[distributed]>=2024.1",  # scan_pnlss and other many-fit jobs (scan.py)
     ],
     zip_safe=False,
     extras_require={"test": ["pytest"]},

@@ -22,3 +22,28 @@ class IdentificationConfig:
     # weighting halves the medium-level errors but the low-level sines make the model run away
     # (relative error ~50), so the default stays "none".
     level_weighting: str = "none"
+    # Cross-validated structure scan (scan.py) for the final all-levels PNLSS instead of the
+    # one structure above: every (nx, degrees, equations) of the grid is fitted from the
+    # level-1 BLA's subspace model of that order and scored on the validation realization;
+    # the one-standard-error rule keeps the simplest adequate model. Online refits keep the
+    # single structure (they must stay fast).
+    scan: bool = False
+    scan_nx: tuple[int, ...] = (1, 2, 3)
+    scan_degrees: tuple[tuple[int, ...], ...] = ((2,), (2, 3), (2, 3, 4, 5))
+    scan_equations: tuple[str, ...] = ("state", "state+output")
+    scan_max_iter: int = 50  # the paper's scan: 50 Levenberg–Marquardt iterations
+    scan_workers: int = 0  # local worker processes (0: every core; 1: in process)
+    scan_scheduler: str = ""  # Dask scheduler to run the scan on (tcp://HOST:8786); "": local
+
+
+def parse_degrees(text: str) -> tuple[int, ...]:
+    """A degree set written as a parameter string ("2,3") as a tuple; ValueError when bad."""
+    try:
+        degrees = tuple(int(part) for part in text.replace(" ", "").split(",") if part)
+    except ValueError:
+        raise ValueError(
+            f"a degree set is integers separated by commas, e.g. '2,3'; got {text!r}"
+        ) from None
+    if not degrees or min(degrees) < 2:
+        raise ValueError(f"PNLSS degrees are integers >= 2, e.g. '2,3'; got {text!r}")
+    return degrees

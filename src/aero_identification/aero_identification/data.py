@@ -39,8 +39,9 @@ class PeriodicData:
     y: np.ndarray
     fs: float
     excited_lines: np.ndarray
-    period_index: np.ndarray = field(default=None)  # type: ignore[assignment]
-    realization_index: np.ndarray = field(default=None)  # type: ignore[assignment]
+    # None = the default layout, filled in by __post_init__ (never None afterwards).
+    period_index: np.ndarray = field(default=None)  # type: ignore[arg-type]  # see above
+    realization_index: np.ndarray = field(default=None)  # type: ignore[arg-type]  # see above
 
     def __post_init__(self) -> None:
         u = np.asarray(self.u, dtype=float)

@@ -45,7 +45,7 @@ from rig_runtime.interface import (
 
 from . import refit_worker
 from .campaign import CampaignAssembler
-from .config import IdentificationConfig
+from .config import IdentificationConfig, parse_degrees
 from .quality import data_quality_lines
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
@@ -58,6 +58,19 @@ PARAMETERS = [
     Parameter("max_iter", 100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000),
     Parameter("estimation_realization", 0, "realization of every level used for estimation", min=0),
     Parameter("validation_realization", 1, "realization used for validation", min=0),
+    Parameter(
+        "level_weighting",
+        "none",
+        "weights of the levels in the all-levels PNLSS cost",
+        choices=("none", "relative"),
+    ),
+    Parameter("scan", False, "final all-levels PNLSS by the cross-validated structure scan"),
+    Parameter("scan_nx", [1, 2, 3], "scan: state orders", min=1, max=6),
+    Parameter("scan_degrees", ["2", "2,3", "2,3,4,5"], "scan: degree sets, e.g. '2,3'"),
+    Parameter("scan_equations", ["state", "state+output"], "scan: where monomials enter"),
+    Parameter("scan_max_iter", 50, "scan: Levenberg-Marquardt iterations per fit", min=1),
+    Parameter("scan_workers", 0, "scan: local worker processes (0 = every core)", min=0),
+    Parameter("scan_scheduler", "", "scan: Dask scheduler address ('' = local processes)"),
     Parameter("use_worker", True, "refit in a worker process (false: inline, for debugging)"),
     Parameter("exit_after_final", True, "exit once the final identification is published"),
     Parameter("max_early_samples", 20000, "samples kept while waiting for the plan", min=0),
@@ -81,6 +94,14 @@ class Identifier:
             max_iter=p["max_iter"],
             estimation_realization=p["estimation_realization"],
             validation_realization=p["validation_realization"],
+            level_weighting=p["level_weighting"],
+            scan=p["scan"],
+            scan_nx=tuple(p["scan_nx"]),
+            scan_degrees=tuple(parse_degrees(text) for text in p["scan_degrees"]),
+            scan_equations=tuple(p["scan_equations"]),
+            scan_max_iter=p["scan_max_iter"],
+            scan_workers=p["scan_workers"],
+            scan_scheduler=p["scan_scheduler"],
         )
         if self.config.estimation_realization == self.config.validation_realization:
             raise ValueError(

@@ -36,6 +36,7 @@ from .metrics import predict_bla_sine, relative_rms_error
 from .models import LinearStateSpace, PNLSSModel
 from .pnlss import fit_pnlss, linear_states, periodic_records
 from .quality import data_quality, data_quality_lines, data_quality_note
+from .scan import ScanResult, scan_pnlss
 from .subspace import fit_linear_ss
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
@@ -70,6 +71,7 @@ class IdentificationResult:
     level1_signature: bytes = b""  # which level-1 periods the level-1 PNLSS was trained on
     excluded_sines: list[str] = field(default_factory=list)
     data_quality: dict[str, Any] = field(default_factory=dict)  # see data_quality()
+    scan: ScanResult | None = None  # the structure scan of the all-levels PNLSS (config.scan)
 
     @property
     def clean(self) -> bool:
@@ -147,6 +149,14 @@ class IdentificationResult:
             "warnings": self.warnings,
             "data_quality": self.data_quality,
             "timings_s": self.timings_s,
+            "pnlss_scan": None
+            if self.scan is None
+            else {
+                "table": self.scan.table,
+                "rule": self.scan.rule,
+                "seconds": self.scan.seconds,
+                "workers": self.scan.workers,
+            },
         }
 
 
@@ -210,6 +220,7 @@ def identify(
     final: bool = False,
     models_from: IdentificationResult | None = None,
     previous: IdentificationResult | None = None,
+    client: Any = None,
 ) -> IdentificationResult:
     """Run the pipeline on whatever the assembler holds so far (partial results early on).
 
@@ -217,6 +228,8 @@ def identify(
     sines (the online node does this when only sine records completed since its last refit:
     the multisine data, hence the models, are unchanged). ``previous``: the last refit, whose
     level-1 PNLSS is reused when the level-1 periods it was trained on did not change.
+    ``client``: a ``dask.distributed.Client`` for the structure scan (``config.scan``, final
+    identification only); None: local worker processes.
     """
     config = config or IdentificationConfig()
     fs = assembler.fs
@@ -292,7 +305,11 @@ def identify(
         and len(_valid_periods(assembler.blocks[(lv, val)])) >= 1
     ]
     if result.linear_level1 is not None and ready:
-        result.pnlss_all = _fit_pnlss(assembler, ready, result, config, "all levels")
+        if final and config.scan:
+            result.scan = _scan_pnlss(assembler, ready, result, config, client)
+            result.pnlss_all = result.scan.best if result.scan is not None else None
+        else:
+            result.pnlss_all = _fit_pnlss(assembler, ready, result, config, "all levels")
         if level_ids[0] in ready:
             # Level 1 is complete long before the campaign ends: refit its PNLSS only when its
             # kept periods changed (the fit is deterministic, so reuse gives the same model).
@@ -376,13 +393,57 @@ def _level_signature(
     return b"|".join(parts)
 
 
-def _fit_pnlss(
+def _scan_pnlss(
     assembler: CampaignAssembler,
     levels: list[int],
     result: IdentificationResult,
     config: IdentificationConfig,
-    label: str,
-) -> PNLSSModel | None:
+    client: Any,
+) -> ScanResult | None:
+    """The all-levels PNLSS by the cross-validated structure scan (scan.py): the training and
+    validation sets of `_fit_pnlss`, every order's linear start from the level-1 BLA."""
+    sets = _pnlss_sets(assembler, levels, result, config)
+    low = result.levels[levels[0]] if levels else None
+    if sets is None or low is None or low.bla is None or result.linear_level1 is None:
+        return None
+    data, validation = sets
+    u0, y0 = result.linear_level1.u_mean, result.linear_level1.y_mean
+    try:
+        linear = {
+            n: fit_linear_ss(low.bla, nx=n).with_operating_point(float(u0[0]), float(y0[0]))
+            for n in sorted(set(config.scan_nx))
+        }
+        if client is None and config.scan_scheduler:
+            from dask.distributed import Client
+
+            with Client(config.scan_scheduler, timeout="30s") as remote:
+                return _scan_pnlss(assembler, levels, result, config, remote)
+        return scan_pnlss(
+            data,
+            validation,
+            nx=config.scan_nx,
+            degrees=config.scan_degrees,
+            equations=config.scan_equations,
+            structures=(config.structure,),
+            max_iter=config.scan_max_iter,
+            client=client,
+            linear=linear,
+            workers=config.scan_workers or None,
+            record_weights=_level_weights(data, config.level_weighting),
+            validation_weights=_level_weights(validation, config.level_weighting),
+        )
+    except (ValueError, OSError) as exc:  # OSError: the Dask scheduler cannot be reached
+        result.warnings.append(f"PNLSS structure scan failed: {exc}")
+        return None
+
+
+def _pnlss_sets(
+    assembler: CampaignAssembler,
+    levels: list[int],
+    result: IdentificationResult,
+    config: IdentificationConfig,
+) -> tuple[PeriodicData, PeriodicData] | None:
+    """Training and validation sets of the PNLSS fit: one steady-state mean period per level."""
     est, val = config.estimation_realization, config.validation_realization
     cols = {lv: _kept_columns(assembler, result, lv, est) for lv in levels}
     if min(len(c) for c in cols.values()) < 1:
@@ -417,7 +478,20 @@ def _fit_pnlss(
         )
         for name in ("u", "y")
     )
-    validation = PeriodicData(u_val, y_val, assembler.fs, lines)
+    return data, PeriodicData(u_val, y_val, assembler.fs, lines)
+
+
+def _fit_pnlss(
+    assembler: CampaignAssembler,
+    levels: list[int],
+    result: IdentificationResult,
+    config: IdentificationConfig,
+    label: str,
+) -> PNLSSModel | None:
+    sets = _pnlss_sets(assembler, levels, result, config)
+    if sets is None:
+        return None
+    data, validation = sets
     weights = _level_weights(data, config.level_weighting)
     val_weights = _level_weights(validation, config.level_weighting)
     lin = result.linear_level1
@@ -607,6 +681,16 @@ def write_report(
     path = out / "data_quality.md"
     path.write_text("\n".join(text).rstrip() + "\n")
     written["data_quality"] = path
+    if result.scan is not None:
+        scan_md = (
+            "# PNLSS structure scan (all levels)\n\n"
+            "Validation error: relative RMS error on the validation realization's steady-state "
+            "periods (docs/design.md §7.6).\n\n" + result.scan.to_markdown()
+        )
+        (out / "pnlss_scan.md").write_text(scan_md)
+        (out / "pnlss_scan.csv").write_text(result.scan.to_csv())
+        written["pnlss_scan"] = out / "pnlss_scan.md"
+        written["pnlss_scan_plot"] = report.plot_scan(result.scan, out / "pnlss_scan.png")
     for lv in result.levels.values():
         tag = lv.name.replace(" ", "_")
         if lv.bla is not None:

@@ -65,9 +65,9 @@ def table1(
         md, cs = [model], [model]
         for level in levels:
             for i in range(freqs_arr.size):
-                value = cells.get((model, level, i))
-                md.append("–" if value is None else f"{value:.{digits}f}")
-                cs.append("" if value is None else repr(value))
+                cell = cells.get((model, level, i))
+                md.append("–" if cell is None else f"{cell:.{digits}f}")
+                cs.append("" if cell is None else repr(cell))
         rows_md.append(md)
         rows_csv.append(cs)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -250,3 +250,46 @@ def plot_cl_alpha(
     for name, cl in (cl_simulated or {}).items():
         ax.plot(alpha_deg, cl, lw=1.0, label=name)
     return _finish(fig, ax, path, "α [°]", "C_l", title)
+
+
+def plot_scan(scan: Any, path: str | Path, title: str = "PNLSS structure scan") -> Path:
+    """Validation error against the number of parameters, one marker per candidate
+    (scan.ScanResult); the kept candidate circled, the one-standard-error band shaded."""
+    fig = Figure(figsize=(7.0, 4.5))
+    ax = fig.add_subplot()
+    styles = {"state": ("o", "tab:blue"), "state+output": ("s", "tab:orange")}
+    ok = [r for r in scan.rows if r.status == "ok" and np.isfinite(r.validation_error)]
+    for equations, (marker, color) in styles.items():
+        rows = [r for r in ok if r.equations == equations]
+        if rows:
+            ax.scatter(
+                [r.n_params for r in rows],
+                [r.validation_error for r in rows],
+                marker=marker,
+                color=color,
+                label=f"monomials in {equations.replace('+', ' and ')}",
+            )
+            for r in rows:
+                ax.annotate(
+                    f"nx={r.nx} d={','.join(map(str, r.degrees))}",
+                    (r.n_params, r.validation_error),
+                    fontsize=6,
+                    xytext=(3, 3),
+                    textcoords="offset points",
+                )
+    if ok:
+        best = min(ok, key=lambda r: r.validation_error)
+        ax.axhspan(
+            best.validation_error,
+            best.validation_error + best.validation_se,
+            color="0.85",
+            label="within one standard error of the best",
+        )
+        kept = scan.best_row
+        ax.scatter(
+            [kept.n_params], [kept.validation_error], s=160, facecolors="none",
+            edgecolors="k", label="kept (one-standard-error rule)",
+        )  # fmt: skip
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    return _finish(fig, ax, path, "parameters", "validation error (relative RMS)", title)

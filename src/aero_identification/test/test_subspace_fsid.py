@@ -1,6 +1,7 @@
 """Frequency-domain subspace identification against discrete systems with known poles."""
 
 import json
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ N = 1024
 LINES = np.arange(1, N // 2, 2)  # odd lines, as from an odd multisine
 
 
-def companion(poles: list[complex], zeros_gain: float = 0.3) -> tuple[np.ndarray, ...]:
+def companion(poles: Sequence[complex], zeros_gain: float = 0.3) -> tuple[np.ndarray, ...]:
     """Real (A, B, C, D) with the given poles (controllable canonical form)."""
     a = np.real(np.poly(poles))
     n = len(poles)

@@ -188,7 +188,9 @@ def _launch_setup(context: Any, *_args: Any, **_kwargs: Any) -> list[Any]:
 
 def generate_graph_launch_description(default_graph: str) -> Any:
     """The LaunchDescription of a .launch.py file: arguments, then the graph's actions."""
-    from launch import LaunchDescription
+    # mypy resolves ``launch`` to this package's launch/ directory (the .launch.py files), a
+    # namespace package without LaunchDescription; ROS's launch is untyped anyway.
+    from launch import LaunchDescription  # type: ignore[attr-defined]  # see the comment above
     from launch.actions import DeclareLaunchArgument, OpaqueFunction
 
     default_path = str(package_share(PACKAGE) / "config" / default_graph)

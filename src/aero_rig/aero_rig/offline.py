@@ -78,7 +78,8 @@ def read_campaign_bag(bag: str | Path) -> BagData:
         plan_conns = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
         plan: dict[str, Any] | None = None
         for conn, _, raw in reader.messages(connections=plan_conns):
-            plan = json.loads(reader.deserialize(raw, conn.msgtype).data)
+            plan_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
+            plan = json.loads(plan_msg.data)
         if plan is None or "t0_ns" not in plan:
             raise BagError(f"bag {path}: /experiment/plan holds no plan with t0_ns")
         assembler = CampaignAssembler(plan, int(plan["t0_ns"]))
@@ -90,7 +91,7 @@ def read_campaign_bag(bag: str | Path) -> BagData:
         count = 0
         try:
             for conn, _, raw in reader.messages(connections=wanted):
-                msg = reader.deserialize(raw, conn.msgtype)
+                msg: Any = reader.deserialize(raw, conn.msgtype)  # a message, typed at runtime
                 if conn.topic == EXPERIMENT_ANOMALY.name:
                     a = Anomaly.from_json(msg.data)  # a later record of the same id replaces it
                     assembler.add_anomaly(a.id, a.first_ns, a.last_ns, a.label())

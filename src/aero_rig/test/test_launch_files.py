@@ -89,6 +89,7 @@ def get_package_share_directory(package: str) -> str:
         module = importlib.import_module(package)
     except ImportError:
         raise LookupError(f"package {package!r} not found") from None
+    assert module.__file__ is not None, package  # a regular package, not a namespace
     source = Path(module.__file__).resolve().parent.parent
     assert (source / "package.xml").is_file(), source
     return str(source)
@@ -96,7 +97,7 @@ def get_package_share_directory(package: str) -> str:
 
 @pytest.fixture
 def ros_stubs(monkeypatch: pytest.MonkeyPatch) -> None:
-    modules = {
+    modules: dict[str, dict[str, Any]] = {
         "launch": {"LaunchDescription": LaunchDescription},
         "launch.actions": {
             "DeclareLaunchArgument": DeclareLaunchArgument,
@@ -120,6 +121,7 @@ def ros_stubs(monkeypatch: pytest.MonkeyPatch) -> None:
 def _description(launch_file: str) -> LaunchDescription:
     path = LAUNCH / launch_file
     spec = importlib.util.spec_from_file_location(f"launch_file_{path.stem}", path)
+    assert spec is not None and spec.loader is not None, path
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.generate_launch_description()

@@ -41,7 +41,7 @@ class ExcitationError(ValueError):
 
 
 def _frozen_array(values: object, dtype: type) -> np.ndarray:
-    array = np.array(values, dtype=dtype)
+    array: np.ndarray = np.array(values, dtype=dtype)
     array.setflags(write=False)
     return array
 

@@ -486,10 +486,11 @@ class ExperimentPlan:
         if isinstance(min_deg, PlanLimits):
             if max_deg is not None or max_rate_deg_s is not None:
                 raise TypeError("validate: pass either a PlanLimits or the numbers, not both")
+            given = min_deg
             min_deg, max_deg, max_rate_deg_s = (
-                min_deg.min_deg,
-                min_deg.max_deg,
-                min_deg.max_rate_deg_s,
+                given.min_deg,
+                given.max_deg,
+                given.max_rate_deg_s,
             )
         lo = self.limits.min_deg if min_deg is None else min_deg
         hi = self.limits.max_deg if max_deg is None else max_deg

@@ -54,6 +54,7 @@ def test_segments_tile_the_command_and_carry_what_cuts_periods(campaign: Experim
     measured = [s for s in campaign.segments if s.kind == "multisine"]
     assert len(measured) == 3 * 2 * 6
     for s in measured:
+        assert s.level is not None and s.realization is not None
         level = campaign.levels[s.level]
         period = level.realizations[s.realization].period()
         assert s.samples_per_period == s.length == 10_000 and s.period in range(6)
@@ -61,6 +62,7 @@ def test_segments_tile_the_command_and_carry_what_cuts_periods(campaign: Experim
     settles = [s for s in campaign.segments if s.kind == "settle" and s.excitation == "multisine"]
     assert len(settles) == 6
     for s in [x for x in campaign.segments if x.kind == "sine"]:
+        assert s.sine_test is not None and s.samples_per_period is not None
         test = campaign.sines[s.sine_test]
         assert s.frequency_hz == test.sine.frequency_hz and s.amplitude_deg == 4.7
         assert s.length == s.periods * s.samples_per_period

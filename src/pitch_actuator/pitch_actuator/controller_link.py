@@ -23,6 +23,7 @@ import time
 from collections import OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import cast
 
 from pitch_actuator.controller_protocol import (
     SEQ_MODULUS,
@@ -113,7 +114,8 @@ class ControllerLink:
                 f"cannot resolve controller_host {config.controller_host!r}: {exc}; "
                 "give an IPv4 address or a resolvable host name"
             ) from exc
-        self._controller_addr: tuple[str, int] = infos[0][4][:2]
+        # AF_INET: the sockaddr is (host, port).
+        self._controller_addr = cast(tuple[str, int], infos[0][4][:2])
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._sock.bind((config.bind_host, config.bind_port))

@@ -45,8 +45,10 @@ from pitch_actuator.controller_protocol import (
 
 
 class _Sample(Protocol):
-    position_rad: float
-    velocity_rad_s: float
+    @property
+    def position_rad(self) -> float: ...
+    @property
+    def velocity_rad_s(self) -> float: ...
 
 
 class _Model(Protocol):

@@ -9,6 +9,11 @@ from pressure_scanner.pitch_alignment import PitchAlignment
 MS = 1_000_000  # ns
 
 
+def _isnan(alpha: float | None) -> bool:
+    """NaN: the pitch cannot be known (None, not known yet, is not NaN)."""
+    return alpha is not None and math.isnan(alpha)
+
+
 def test_exact_stamp_takes_that_state_even_across_a_long_gap() -> None:
     align = PitchAlignment(max_gap_ns=0, max_pending=10)
     align.add_pitch(0, 0.1)
@@ -91,7 +96,7 @@ def test_stamp_before_the_history_is_decided_at_once_and_blocks_nothing() -> Non
     align.add_pitch(100 * MS, 1.0)
     align.add_pitch(110 * MS, 2.0)
     assert align.alpha(95 * MS, final=False) == 1.0  # within the gap: the oldest state
-    assert math.isnan(align.alpha(50 * MS, final=False))
+    assert _isnan(align.alpha(50 * MS, final=False))
     (early,) = align.add_sample(50 * MS, "early")
     assert early[1] == "early" and math.isnan(early[2])
     assert align.add_sample(105 * MS, "later") == [(105 * MS, "later", pytest.approx(1.5))]
@@ -130,8 +135,8 @@ def test_history_is_bounded_and_the_exact_lookup_with_it() -> None:
         assert len(align.by_stamp) <= 3
     assert list(align.stamps) == [7 * MS, 8 * MS, 9 * MS]
     assert sorted(align.by_stamp) == list(align.stamps)
-    assert math.isnan(align.alpha(0, final=False))  # dropped: can no longer be known
-    assert math.isnan(align.alpha(0, final=True))
+    assert _isnan(align.alpha(0, final=False))  # dropped: can no longer be known
+    assert _isnan(align.alpha(0, final=True))
     assert align.alpha(8 * MS, final=False) == 8.0
 
 

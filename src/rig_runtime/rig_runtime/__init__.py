@@ -10,7 +10,13 @@ files and the offline tools use them in processes that must not load a middlewar
 """
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # what __getattr__ loads, for the type checker
+    from .messages import new_message, set_stamp, stamp_to_ns
+    from .node import Node, run_node
+    from .params import Parameter, ParameterError
+    from .qos import PROFILES, QosProfile
 
 _EXPORTS = {
     "PROFILES": "qos",

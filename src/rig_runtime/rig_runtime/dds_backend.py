@@ -7,6 +7,10 @@
   ``deserialize_cdr``, so messages are the typestore's dataclasses with numpy sequences.
 - Every reader and writer carries ``typehash=RIHS01_<hex>;`` in USER_DATA, as rmw_cyclonedds
   does in Jazzy.
+- The process's nodes and the GIDs of their readers and writers are published on
+  ``ros_discovery_info`` (``rmw_dds_common/msg/ParticipantEntitiesInfo``), as rmw_cyclonedds
+  does, so ``ros2 node list`` on a ROS 2 machine sees them; the participant carries
+  ``enclave=/;`` in USER_DATA like an rmw participant.
 - Domain from ``ROS_DOMAIN_ID``. Default network: loopback only, unicast discovery, no
   multicast. ``RIG_DDS_NETWORK=lan`` lets Cyclone pick the lab interface with multicast
   discovery (like a stock ROS 2 install); ``CYCLONEDDS_URI`` (if set) wins over both.
@@ -155,9 +159,108 @@ def participant() -> DomainParticipant:
     if did not in _participants:
         config = cyclone_config()
         domain = Domain(did, config) if config else None
-        _participants[did] = (domain, DomainParticipant(did))
+        # USER_DATA as rmw_cyclonedds sets it (the default enclave "/").
+        qos = Qos(Policy.Userdata(data=b"enclave=/;"))
+        _participants[did] = (domain, DomainParticipant(did, qos=qos))
         _dds_write_set_batch(True)  # applies to the domain just created, before any writer
     return _participants[did][1]
+
+
+# ROS 2 graph information (rmw_dds_common): which nodes a participant holds and which readers and
+# writers belong to each. Topic name without the "rt/" prefix; QoS as rmw_cyclonedds creates its
+# writer: reliable, transient local, keep last 1 (a late joiner gets the current state), no
+# autodispose.
+DISCOVERY_INFO_TOPIC = "ros_discovery_info"
+DISCOVERY_INFO_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
+DISCOVERY_INFO_QOS = PROFILES["latched"]
+
+
+def ros_gid(entity: Any) -> bytes:
+    """An entity's ROS GID: its 16-byte DDS GUID (prefix + entity id), byte for byte as
+    rmw_cyclonedds_cpp's convert_guid_to_gid copies ``dds_guid_t.v`` (Jazzy: 16-byte GIDs)."""
+    return bytes(entity.guid.bytes)
+
+
+class _GraphInfo:
+    """This process's ``ParticipantEntitiesInfo`` on ``ros_discovery_info``, one per participant.
+
+    Rebuilt whenever a node, reader or writer is added or removed, and written only when it
+    differs from the last sample (the writer keeps that one for late joiners). Nodes are listed
+    in creation order, their readers and writers in creation order, as rmw_dds_common's graph
+    cache lists them; the discovery writer itself belongs to no node, as in rmw.
+    """
+
+    def __init__(self, participant: DomainParticipant) -> None:
+        self.participant = participant
+        self.nodes: list[DdsBackend] = []
+        self._lock = threading.Lock()
+        self._pub: DdsPublisher | None = None
+        self._last: bytes | None = None
+
+    def message(self) -> Any:
+        def gid(entity: Any) -> Any:
+            return new_message("rmw_dds_common/msg/Gid", data=list(ros_gid(entity)))
+
+        nodes = [
+            new_message(
+                "rmw_dds_common/msg/NodeEntitiesInfo",
+                node_namespace=node.namespace,
+                node_name=node.node_name,
+                reader_gid_seq=[gid(s.reader) for s in node._subscriptions],
+                writer_gid_seq=[gid(p.writer) for p in node._publishers],
+            )
+            for node in self.nodes
+        ]
+        return new_message(
+            DISCOVERY_INFO_TYPE, gid=gid(self.participant), node_entities_info_seq=nodes
+        )
+
+    def add(self, node: "DdsBackend") -> None:
+        with self._lock:
+            self.nodes.append(node)
+        self.update()
+
+    def remove(self, node: "DdsBackend") -> None:
+        with self._lock:
+            if node in self.nodes:
+                self.nodes.remove(node)
+        self.update()
+
+    def update(self) -> None:
+        """Publish the current state if it changed (cheap enough to call on every change)."""
+        with self._lock:
+            msg = self.message()
+            data = serialize(msg)
+            if data == self._last:
+                return
+            if self._pub is None:
+                topic = Topic(
+                    self.participant, DISCOVERY_INFO_TOPIC, idl_struct(DISCOVERY_INFO_TYPE)
+                )
+                qos = dds_qos(DISCOVERY_INFO_QOS, DISCOVERY_INFO_TYPE, writer=True)
+                qos += Qos(Policy.WriterDataLifecycle(autodispose=False))
+                writer = DataWriter(self.participant, topic, qos)
+                # Its own flush queue: written outside any executor turn, so sent at once.
+                self._pub = DdsPublisher(
+                    DISCOVERY_INFO_TOPIC,
+                    DISCOVERY_INFO_TYPE,
+                    writer,
+                    _FlushQueue(),
+                    DISCOVERY_INFO_QOS,
+                )
+            self._pub.publish(msg)
+            self._last = data
+
+
+_graph_infos: dict[int, _GraphInfo] = {}
+
+
+def graph_info() -> _GraphInfo:
+    """The ``ros_discovery_info`` state of this process's participant in the current domain."""
+    did = domain_id()
+    if did not in _graph_infos:
+        _graph_infos[did] = _GraphInfo(participant())
+    return _graph_infos[did]
 
 
 class _FlushQueue:
@@ -386,6 +489,8 @@ class DdsBackend:
         self._waitset.attach(self._guard)
         self._discovery: BuiltinDataReader | None = None
         self._discovered: dict[str, tuple[str, QosProfile | None]] = {}
+        self._graph = graph_info()
+        self._graph.add(self)  # ROS 2 tools see the node (ros_discovery_info)
 
     def _topic(self, topic: str, type_name: str) -> Topic:
         key = (topic, type_name)
@@ -400,6 +505,7 @@ class DdsBackend:
         )
         pub = DdsPublisher(topic, type_name, writer, self._flush_queue, qos)
         self._publishers.append(pub)
+        self._graph.update()
         return pub
 
     def create_subscription(
@@ -418,6 +524,7 @@ class DdsBackend:
         self._waitset.attach(condition)
         sub = DdsSubscription(topic, type_name, reader, condition, callback, raw, qos)
         self._subscriptions.append(sub)
+        self._graph.update()
         return sub
 
     def create_timer(self, period_s: float, callback: Callable[[], None]) -> DdsTimer:
@@ -526,6 +633,7 @@ class DdsBackend:
         self._subscriptions.clear()
         self._publishers.clear()
         self._timers.clear()
+        self._graph.remove(self)  # the node and its endpoints leave the ROS graph
 
 
 def _delete_entity(entity: Any) -> None:

@@ -35,21 +35,23 @@ _BASE_TYPES: dict[str, Any] = {
 }
 
 
+# cyclonedds builds IDL types by subscripting plain classes (``__class_getitem__``), which mypy
+# reads as a generic alias of a non-generic class: the subscriptions below carry an ignore.
 def _idl_type(node: tuple[Any, Any]) -> Any:
     nodetype, rest = node
     if nodetype == Nodetype.BASE:
         base, bound = rest
         if base == "string" and bound:
-            return idl.bounded_str[bound]
+            return idl.bounded_str[bound]  # type: ignore[misc]  # IDL type, see above
         return _BASE_TYPES[base]
     if nodetype == Nodetype.NAME:
         return idl_struct(rest)
     sub, length = rest
     if nodetype == Nodetype.ARRAY:
-        return idl.array[_idl_type(sub), length]
+        return idl.array[_idl_type(sub), length]  # type: ignore[misc]  # IDL type, see above
     if length:
-        return idl.sequence[_idl_type(sub), length]
-    return idl.sequence[_idl_type(sub)]
+        return idl.sequence[_idl_type(sub), length]  # type: ignore[misc]  # IDL type, see above
+    return idl.sequence[_idl_type(sub)]  # type: ignore[misc]  # IDL type, see above
 
 
 @functools.cache

@@ -11,7 +11,7 @@ import functools
 from typing import Any
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Nodetype, Typestore
 
 _NUMPY_DTYPES = {
@@ -35,10 +35,40 @@ class MessageTypeError(ValueError):
     """A message type name that the Jazzy typestore does not know."""
 
 
+# rmw_dds_common's graph messages, Jazzy layout (16-byte GIDs; 24 before Iron): what the Cyclone
+# DDS backend publishes on ``ros_discovery_info`` so that ROS 2 tools see its nodes
+# (docs/design.md §3.1). The .msg text of ros2/rmw_dds_common (jazzy). rosbags' Jazzy store
+# ships the same definitions; they are registered only into a store that lacks them.
+RMW_DDS_COMMON_MSGS = {
+    "rmw_dds_common/msg/Gid": "char[16] data\n",
+    "rmw_dds_common/msg/NodeEntitiesInfo": (
+        "string<=256 node_namespace\n"
+        "string<=256 node_name\n"
+        "Gid[] reader_gid_seq\n"
+        "Gid[] writer_gid_seq\n"
+    ),
+    "rmw_dds_common/msg/ParticipantEntitiesInfo": (
+        "Gid gid\nNodeEntitiesInfo[] node_entities_info_seq\n"
+    ),
+}
+
+
+def register_missing(store: Typestore, definitions: dict[str, str]) -> None:
+    """Register ``{type name: .msg text}`` into ``store``, skipping types it already has."""
+    types: dict[str, Any] = {}
+    for name, text in definitions.items():
+        if name not in store.fielddefs:
+            types.update(get_types_from_msg(text, name))
+    if types:
+        store.register(types)
+
+
 @functools.cache
 def typestore() -> Typestore:
-    """The process-wide ROS 2 Jazzy typestore (common_interfaces and friends)."""
-    return get_typestore(Stores.ROS2_JAZZY)
+    """The process-wide ROS 2 Jazzy typestore (common_interfaces and friends, rmw_dds_common)."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    register_missing(store, RMW_DDS_COMMON_MSGS)
+    return store
 
 
 @functools.lru_cache(maxsize=1024)  # called per message: keep it a dictionary lookup

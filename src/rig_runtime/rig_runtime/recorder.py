@@ -103,6 +103,7 @@ class Recorder:
         for e in endpoints:
             if e.kind != "reader" or e.topic not in self.subscriptions:
                 continue
+            others: set[str] | set[int]
             if e.matched is not None:
                 others = set(e.matched) - own
             else:  # rclpy: counts only

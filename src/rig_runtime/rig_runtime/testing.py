@@ -163,7 +163,11 @@ class Processes:
                     os.kill(p.pid, sig)
                 except ProcessLookupError:
                     pass
-            wait_for(lambda alive=alive: all(p.poll() is not None for p in alive), grace_s)
+
+            def exited(alive: list[subprocess.Popen[bytes]] = alive) -> bool:
+                return all(p.poll() is not None for p in alive)
+
+            wait_for(exited, grace_s)
         for p in self.procs:
             p.wait(timeout=grace_s)
         for log in self._logs:

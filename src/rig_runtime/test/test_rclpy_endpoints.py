@@ -2,17 +2,18 @@
 (rclpy is not installable here; docs/ros_machine.md has the check on a ROS machine)."""
 
 from types import SimpleNamespace
+from typing import Any
 
 from rig_runtime.barrier import ReadinessReport, StartBarrier
 from rig_runtime.interface import PITCH_COMMAND
-from rig_runtime.qos import PROFILES
+from rig_runtime.qos import PROFILES, QosProfile
 from rig_runtime.rclpy_backend import RclpyBackend, RclpyPublisher
 
 
-def _backend(fq_name: str, endpoints: list[tuple[str, object, object]]) -> RclpyBackend:
+def _backend(fq_name: str, endpoints: list[tuple[str, Any, QosProfile]]) -> RclpyBackend:
     backend = object.__new__(RclpyBackend)  # no rclpy.init: only endpoints() is exercised
-    backend.node = SimpleNamespace(get_fully_qualified_name=lambda: fq_name)  # type: ignore[attr-defined]
-    backend._endpoints = endpoints  # type: ignore[attr-defined]
+    backend.node = SimpleNamespace(get_fully_qualified_name=lambda: fq_name)
+    backend._endpoints = endpoints
     return backend
 
 

@@ -1,6 +1,7 @@
 """The split bag writer: MCAP records identical to rosbags', metadata listing closed files."""
 
 from pathlib import Path
+from typing import Any
 
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2.enums import CompressionMode
@@ -36,9 +37,8 @@ def test_metadata_lists_only_closed_files(tmp_path: Path) -> None:
     bag.split()
     bag.write(cid, 100, serialize(new_message("std_msgs/msg/String", data="open")))
     with AnyReader([tmp_path / "bag"]) as reader:  # the open file is not listed yet
-        assert [reader.deserialize(r, c.msgtype).data for c, _, r in reader.messages()] == [
-            str(k) for k in range(10)
-        ]
+        msgs: list[Any] = [reader.deserialize(r, c.msgtype) for c, _, r in reader.messages()]
+        assert [m.data for m in msgs] == [str(k) for k in range(10)]
     bag.close()
     with AnyReader([tmp_path / "bag"]) as reader:
         assert reader.message_count == 11

@@ -108,7 +108,11 @@ def test_batched_writes_in_a_turn_leave_when_the_turn_ends(
     tmp_path: Path, monkeypatch: Any
 ) -> None:
     def in_one_turn(node: Any, send: Callable[[int], None]) -> None:
-        timer = node.create_timer(0.001, lambda: [send(i) for i in range(5)])
+        def send_all() -> None:
+            for i in range(5):
+                send(i)
+
+        timer = node.create_timer(0.001, send_all)
         node.spin_once(1.0)  # the timer fires once inside this turn
         timer.cancel()
 
@@ -117,7 +121,11 @@ def test_batched_writes_in_a_turn_leave_when_the_turn_ends(
 
 def test_writes_outside_a_turn_leave_at_once(tmp_path: Path, monkeypatch: Any) -> None:
     def from_a_thread(node: Any, send: Callable[[int], None]) -> None:
-        worker = threading.Thread(target=lambda: [send(i) for i in range(5)])
+        def send_all() -> None:
+            for i in range(5):
+                send(i)
+
+        worker = threading.Thread(target=send_all)
         worker.start()
         worker.join(10)
 

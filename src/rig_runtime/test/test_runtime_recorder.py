@@ -4,6 +4,7 @@ import os
 import signal
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ def _read(bag: Path) -> tuple[list[int], list[str], dict]:
     with AnyReader([bag]) as reader:
         seqs = []
         for conn, _t, raw in reader.messages():
-            msg = reader.deserialize(raw, conn.msgtype)
+            msg: Any = reader.deserialize(raw, conn.msgtype)
             points = np.frombuffer(np.asarray(msg.data, np.uint8).tobytes(), np.float32)
             points = points.reshape(TAP_COUNT, 4)
             assert msg.width == TAP_COUNT and msg.point_step == 16

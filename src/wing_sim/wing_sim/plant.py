@@ -13,6 +13,7 @@ import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal, overload
 
 import numpy as np
 
@@ -183,6 +184,18 @@ class WingPlant:
         self._samples += 1
         return pressure[0]
 
+    @overload
+    def simulate(
+        self, alpha_rad: np.ndarray, *, clean_cp: Literal[False] = False
+    ) -> tuple[np.ndarray, WingTruthSeries]: ...
+    @overload
+    def simulate(
+        self, alpha_rad: np.ndarray, *, clean_cp: Literal[True]
+    ) -> tuple[np.ndarray, WingTruthSeries, np.ndarray]: ...
+    @overload
+    def simulate(
+        self, alpha_rad: np.ndarray, *, clean_cp: bool
+    ) -> tuple[np.ndarray, WingTruthSeries] | tuple[np.ndarray, WingTruthSeries, np.ndarray]: ...
     def simulate(
         self, alpha_rad: np.ndarray, *, clean_cp: bool = False
     ) -> tuple[np.ndarray, WingTruthSeries] | tuple[np.ndarray, WingTruthSeries, np.ndarray]:

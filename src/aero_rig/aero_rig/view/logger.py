@@ -35,7 +35,10 @@ from .blueprint import (
     slug,
 )
 
-PREDICTION_SERIES = (("cl_measured", "measured", GRAY), ("cl_bla_ss", "bla_ss", BLUE))
+PREDICTION_SERIES: tuple[tuple[str, str, tuple[int, int, int]], ...] = (
+    ("cl_measured", "measured", GRAY),
+    ("cl_bla_ss", "bla_ss", BLUE),
+)
 PREDICTION_SERIES += (("cl_pnlss", "pnlss", ORANGE),)
 STATUS_LEVELS = {0: "INFO", 1: "WARN", 2: "ERROR", 3: "WARN"}
 
