@@ -27,14 +27,16 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 import pnlss_fit as duffing  # the data generator of the PNLSS fit benchmark
 
-GRID = {
-    "nx": (1, 2, 3),
+NX = (1, 2, 3)
+GRID: dict[str, Any] = {
+    "nx": NX,
     "degrees": ((2,), (2, 3), (2, 3, 4, 5)),
     "equations": ("state", "state+output"),
     "structures": ("full",),
@@ -42,7 +44,7 @@ GRID = {
 MAX_ITER = 50
 
 
-def make_data(periods: int) -> tuple:
+def make_data(periods: int) -> tuple[Any, Any]:
     from aero_identification.data import PeriodicData
 
     rng = np.random.default_rng(2024)
@@ -88,7 +90,7 @@ def main() -> None:
     )
     bla = estimate_bla(both)
     u0, y0 = float(train.u.mean()), float(train.y.mean())
-    linear = {n: fit_linear_ss(bla, nx=n).with_operating_point(u0, y0) for n in GRID["nx"]}
+    linear = {n: fit_linear_ss(bla, nx=n).with_operating_point(u0, y0) for n in NX}
     print(f"data: {train.N} × {train.P} training samples, validation {val.N} × {val.P}, "
           f"{train.excited_lines.size} excited lines; {os.cpu_count()} cores")  # fmt: skip
 

@@ -26,13 +26,14 @@ class IdentificationConfig:
     # one structure above: every (nx, degrees, equations) of the grid is fitted from the
     # level-1 BLA's subspace model of that order and scored on the validation realization;
     # the one-standard-error rule keeps the simplest adequate model. Online refits keep the
-    # single structure (they must stay fast).
-    scan: bool = False
-    scan_nx: tuple[int, ...] = (1, 2, 3)
+    # single structure (they must stay fast). Default grid: nx ≤ 2, since an nx = 3 candidate
+    # with degrees 2-5 costs 15-30 s alone on two cores (README, "PNLSS structure scan").
+    scan: bool = True
+    scan_nx: tuple[int, ...] = (1, 2)
     scan_degrees: tuple[tuple[int, ...], ...] = ((2,), (2, 3), (2, 3, 4, 5))
     scan_equations: tuple[str, ...] = ("state", "state+output")
     scan_max_iter: int = 50  # the paper's scan: 50 Levenberg–Marquardt iterations
-    scan_workers: int = 0  # local worker processes (0: every core; 1: in process)
+    scan_workers: int = 1  # local worker processes (0: every core; 1: in this process)
     scan_scheduler: str = ""  # Dask scheduler to run the scan on (tcp://HOST:8786); "": local
 
 
