@@ -14,7 +14,6 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/launch", glob("launch/*.py") + glob("launch/*.yaml")),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
     ],
     package_data={package_name: ["py.typed"]},
