@@ -10,15 +10,18 @@ weighs more) and one validation realization of 2 periods.
 Grid (18 candidates): nx ∈ {1, 2, 3} × degrees ∈ {(2,), (2, 3), (2, 3, 4, 5)} × equations ∈
 {state, state+output}, "full" structure, 50 Levenberg–Marquardt iterations each.
 
-Three runs of `scan_pnlss` on the same data:
-- serial: ``workers=1``, one fit after the other in this process;
+Runs of `scan_pnlss` on the same data:
+- serial: ``workers=1``, one fit after the other in this process, on one core (numba kernels
+  limited to one thread: what one worker of the parallel runs has);
+- serial, threaded: the same with the kernels' own parallelism over records (numba prange,
+  every core), for comparison;
 - parallel: the default, a local Dask cluster with one single-threaded worker process per core
   (its start-up is included: it is what a user waits for);
 - dask: an explicit 2-worker ``LocalCluster`` + ``Client`` passed as ``client=`` (the way a
   remote cluster is used; the cluster's start-up is reported apart and not included).
 
-Prints the scan table, the three wall times, the speed-up serial / parallel and whether the
-three runs selected the same candidate. Last line: JSON.
+Prints the scan table, the wall times, the speed-up serial (one core) / parallel and whether
+every run selected the same candidate. Last line: JSON.
 """
 
 import argparse
@@ -98,11 +101,21 @@ def main() -> None:
     scan_pnlss(train, val, nx=(1,), degrees=((2,),), equations=("state",), max_iter=1,
                linear=linear, workers=1)  # fmt: skip
 
+    import numba
+
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)  # "1 worker": one core, as each worker of the parallel runs
     t0 = time.perf_counter()
     serial = scan_pnlss(train, val, **GRID, max_iter=MAX_ITER, linear=linear, workers=1)
     serial_s = time.perf_counter() - t0
+    numba.set_num_threads(threads)
     print(serial.to_markdown())
-    print(f"serial: {serial_s:.1f} s")
+    print(f"serial, one core: {serial_s:.1f} s")
+    # For comparison: serial with the kernels' own parallelism over records (numba prange).
+    t0 = time.perf_counter()
+    threaded = scan_pnlss(train, val, **GRID, max_iter=MAX_ITER, linear=linear, workers=1)
+    threaded_s = time.perf_counter() - t0
+    print(f"serial, numba threads over records ({threads}): {threaded_s:.1f} s")
 
     t0 = time.perf_counter()
     parallel = scan_pnlss(train, val, **GRID, max_iter=MAX_ITER, linear=linear)
@@ -120,7 +133,7 @@ def main() -> None:
         dask_s = time.perf_counter() - t0
     print(f"dask (2-worker LocalCluster as client): {dask_s:.1f} s (+ {startup_s:.1f} s start)")
 
-    same = serial.best_index == parallel.best_index == remote.best_index
+    same = serial.best_index == parallel.best_index == remote.best_index == threaded.best_index
     best = serial.best_row
     print(f"selected: nx={best.nx}, degrees {list(best.degrees)}, {best.equations}; "
           f"same in all three runs: {same}")  # fmt: skip
@@ -128,6 +141,7 @@ def main() -> None:
         "candidates": len(serial.rows),
         "training_samples": int(train.N * train.P),
         "serial_s": round(serial_s, 2),
+        "serial_threaded_s": round(threaded_s, 2),
         "parallel_s": round(parallel_s, 2),
         "dask_s": round(dask_s, 2),
         "dask_startup_s": round(startup_s, 2),

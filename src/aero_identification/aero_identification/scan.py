@@ -313,7 +313,9 @@ def _on_client(
     options: dict[str, Any],
 ) -> list[tuple[ScanRow, PNLSSModel | None]]:
     # Data once per worker, not once per task; the largest candidates first, so the last
-    # task to finish is a small one.
+    # task to finish is a small one. One numba thread per fit: the workers are the
+    # parallelism (the kernels' own prange over records would oversubscribe the cores).
+    options = {**options, "numba_threads": 1}
     data_f, val_f = client.scatter([data, validation], broadcast=True)
     order = sorted(range(len(jobs)), key=lambda i: -_size(jobs[i][0]))
     futures = {
@@ -335,6 +337,11 @@ def fit_candidate(
     options: Mapping[str, Any],
 ) -> tuple[ScanRow, PNLSSModel | None]:
     """Fit one candidate and score it; a failed fit is a row with its reason, never a crash."""
+    threads = options.get("numba_threads")
+    if threads is not None:
+        import numba
+
+        numba.set_num_threads(int(threads))  # this thread's kernels (a Dask worker's task)
     t0 = time.perf_counter()
     try:
         model = fit_pnlss(
