@@ -226,6 +226,7 @@ def test_fit_of_bag_with_a_damaged_file_warns_and_fits(campaign, tmp_path: Path)
     # What the damage cost is listed, and the fit fails unless that is accepted explicitly.
     assert proc.returncode == 3, proc.stderr
     assert "warning" in proc.stderr and "damaged" in proc.stderr
+    assert "last readable time" in proc.stderr  # the recorder's receive time of the last chunk
     assert "DATA NOT CLEAN" in proc.stdout and "plan samples missing" in proc.stdout
     proc = _aero_rig(
         *("fit", str(bag), "--out", str(tmp_path / "fit"), "--allow-excluded"),

@@ -10,6 +10,7 @@ anomalies recorded on ``/experiment/anomaly`` exclude what they touch, as in the
 
 import json
 import math
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -55,19 +56,21 @@ def read_campaign_bag(bag: str | Path) -> BagData:
     if not path.exists():
         raise BagError(f"bag {path} does not exist")
     warnings: list[str] = []
+    view: Path | None = None
     try:
         reader = AnyReader([path])
         reader.open()
     except Exception as exc:
-        readable, damaged = _readable_view(path)
-        if readable is None:
+        view, warning = _recovered_view(path, exc)
+        if view is None:
             raise BagError(f"cannot open bag {path}: {exc}") from exc
-        warnings.append(
-            f"bag {path} has damaged file(s) {damaged} ({exc}); fitting the data of the "
-            "readable files, i.e. up to the damage"
-        )
-        reader = AnyReader([readable])
-        reader.open()
+        warnings.append(warning)
+        try:
+            reader = AnyReader([view])
+            reader.open()
+        except Exception as exc2:
+            shutil.rmtree(view.parent, ignore_errors=True)
+            raise BagError(f"cannot open bag {path}: {exc}; recovered copy: {exc2}") from exc2
     try:
         topics = {c.topic for c in reader.connections}
         missing = [t for t in REQUIRED_TOPICS if t not in topics]
@@ -110,51 +113,37 @@ def read_campaign_bag(bag: str | Path) -> BagData:
             )
     finally:
         reader.close()
+        if view is not None:
+            shutil.rmtree(view.parent, ignore_errors=True)
     return BagData(plan, assembler, count, warnings)
 
 
-def _readable_view(path: Path) -> tuple[Path | None, list[str]]:
-    """A copy of a rosbag2 directory's metadata listing only the files that open.
+def _recovered_view(path: Path, exc: Exception) -> tuple[Path | None, str]:
+    """A readable copy of an MCAP bag whose file(s) lost their footer, and the warning.
 
-    A recording cut short (power loss, kill -9 of a writer that does not split) leaves an MCAP
-    file without its footer, which rosbags refuses whole. The view links the good files into a
-    temporary directory beside a trimmed metadata.yaml; None if nothing is readable.
+    A recording cut short (kill -9 or power loss of the recorder, a copy cut short) leaves an
+    MCAP file without its footer and summary, which rosbags refuses whole. The whole files are
+    linked and the damaged ones rewritten up to their last complete chunk
+    (rig_runtime.bag_recover, what ``aero-rig bag recover`` does in place) into a temporary
+    directory; None if that is not an MCAP bag or nothing in it is readable.
     """
-    import tempfile
+    from rig_runtime.bag_recover import format_stamp, last_readable_ns, recovered_view
 
-    import yaml
-    from rosbags.rosbag2.storage_mcap import McapReader
-
-    meta_path = path / "metadata.yaml"
-    if not meta_path.exists():
-        return None, []
-    meta = yaml.safe_load(meta_path.read_text())
-    info = meta["rosbag2_bagfile_information"]
-    if info.get("storage_identifier") != "mcap":
-        return None, []
-    good, damaged = [], []
-    for name in info["relative_file_paths"]:
-        file = path / Path(name).name
-        probe = McapReader(file)
-        try:
-            probe.open()
-            probe.close()
-            good.append(name)
-        except Exception:
-            damaged.append(Path(name).name)
-    if not good or not damaged:
-        return None, damaged
-    view = Path(tempfile.mkdtemp(prefix="aero_rig_fit_")) / path.name
-    view.mkdir()
-    for name in good:
-        (view / Path(name).name).symlink_to((path / Path(name).name).resolve())
-    info["relative_file_paths"] = good
-    info["files"] = [f for f in info.get("files", []) if f["path"] in good]
-    info["message_count"] = sum(f["message_count"] for f in info["files"])
-    for topic in info.get("topics_with_message_count", []):
-        topic["message_count"] = 0  # unknown per file; the reader counts the messages itself
-    (view / "metadata.yaml").write_text(yaml.safe_dump(meta))
-    return view, damaged
+    try:
+        view, reports = recovered_view(path)
+    except Exception:
+        return None, ""
+    damaged = [r for r in reports if not r.intact]
+    if not damaged or not any(r.stats.count for r in reports):
+        shutil.rmtree(view.parent, ignore_errors=True)
+        return None, ""
+    files = ", ".join(f"{r.name} ({r.error}, {r.stats.count} messages readable)" for r in damaged)
+    warning = (
+        f"bag {path} has damaged file(s) {files} ({type(exc).__name__}: {exc}); fitting the "
+        f"data up to the damage: last readable time {format_stamp(last_readable_ns(reports))}. "
+        f"`aero-rig bag recover {path}` repairs the bag in place"
+    )
+    return view, warning
 
 
 def fit_bag(

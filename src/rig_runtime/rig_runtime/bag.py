@@ -1,107 +1,128 @@
-"""A rosbag2 (MCAP) writer that survives ``kill -9``: the bag is split into files.
+"""A rosbag2 (MCAP) writer: chunk-compressed, split on demand, readable after ``kill -9``.
 
-rosbags' MCAP writer makes a file readable only when it is closed (the footer and summary
-come last). So the recorder rotates files: every ``split_seconds`` of wall time (or
-``split_bytes``) the current ``<bag>_<i>.mcap`` is closed and ``metadata.yaml`` is rewritten
-atomically (temp file + rename) to list the closed files. After SIGINT/SIGTERM the last file
-is closed too. After ``kill -9`` the bag holds every closed file: what is lost is at most the
-last ``split_seconds`` of data (the open file, not listed in metadata.yaml). This is what
-``ros2 bag record --max-bag-duration`` does, with a short default.
+Files are written by Foxglove's ``mcap`` writer (the MCAP reference library) with zstd (or lz4,
+or no) chunk compression, as ``ros2 bag record -s mcap`` does with a compressing storage preset.
+Like rosbag2, ``metadata.yaml`` then says ``compression_format: ''`` and
+``compression_mode: ''``: those fields describe rosbag2's own file/message compression, and the
+chunk compression lives inside the MCAP storage (rosbags writes the same for its storage-level
+compression).
+
+One file per bag, unless the user asks for splits: ``max_bag_size`` [bytes] and
+``max_bag_duration`` [ns of recorded time] start a new ``<bag>_<i>.mcap`` when the open file
+reaches them (0: off), as ``ros2 bag record --max-bag-size/--max-bag-duration`` do.
+
+Crash safety: :meth:`BagWriter.flush` closes the open chunk and hands it to the OS; the recorder
+calls it every ``flush_s``, so after ``kill -9`` every message older than that is in a complete
+chunk on disk. Such a file has no footer or summary; ``metadata.yaml`` (rewritten atomically
+whenever a file is opened or closed) lists it. :mod:`rig_runtime.bag_recover` reads it up to
+its last complete chunk and rewrites it with a footer (``aero-rig bag recover``, like
+``ros2 bag reindex``).
 """
 
-import struct
-import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from importlib.metadata import version
 from io import StringIO
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from rosbags.interfaces import (
     Connection,
     ConnectionExtRosbag2,
     MessageDefinition,
     MessageDefinitionFormat,
 )
-from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.metadata import dump_qos_v9
-from rosbags.rosbag2.storage_mcap import McapWriter
 from ruamel.yaml import YAML
 
 from .messages import normalize_type_name, typestore
 from .qos import PROFILES, QosProfile
 
-BAG_VERSION = 9
-
-
-class _McapFile(McapWriter):
-    """rosbags' MCAP storage writer, but with a file name of our choosing (for splits)."""
-
-    def __init__(self, file: Path) -> None:
-        # McapWriter names its single file after the bag directory; reuse all of its record
-        # writing by letting it create the file in a scratch dir, then moving it in place.
-        scratch = file.with_suffix(".opening")
-        scratch.mkdir()
-        super().__init__(scratch, CompressionMode.NONE)
-        self.bio.close()
-        created = self.path
-        created.replace(file)
-        scratch.rmdir()
-        self.path = file
-        self.bio = file.open("ab")
-
-    # MCAP Message record (opcode 0x05): u64 length, u16 channel, u32 sequence, u64 log time,
-    # u64 publish time, data. The same bytes as McapWriter.write builds field by field, packed
-    # at once: the recorder writes thousands of messages per second.
-    _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
-
-    def write(self, connection: Connection, timestamp: int, data: bytes | memoryview) -> None:
-        self.message_start_time = min(timestamp, self.message_start_time)
-        self.message_end_time = max(timestamp, self.message_end_time)
-        self.channel_stats[connection.id] += 1
-        chunk = self.chunk
-        chunk.message_start_time = min(timestamp, chunk.message_start_time)
-        chunk.message_end_time = max(timestamp, chunk.message_end_time)
-        chunk.msgs[connection.id].append((timestamp, chunk.bio.tell()))
-        length = 2 + 4 + 8 + 8 + len(data)
-        chunk.bio.write(
-            self._MESSAGE_HEAD.pack(0x05, length, connection.id, 0, timestamp, timestamp)
-        )
-        chunk.bio.write(data)
-        if chunk.bio.tell() > 2**20:
-            self.close_chunk()
+BAG_VERSION = 9  # rosbag2 Jazzy's metadata.yaml version
+COMPRESSIONS = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+CHUNK_SIZE = 2**20  # uncompressed bytes per chunk (the mcap writer's default)
+LIBRARY = f"rig_runtime; mcap {version('mcap')}"
 
 
 @dataclass
-class _FileStats:
+class FileStats:
+    """What metadata.yaml says about one file of the bag."""
+
     name: str
     start_ns: int = 2**63 - 1
     end_ns: int = 0
     count: int = 0
-    counts: dict[int, int] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)  # per topic
+
+    def add(self, topic: str, timestamp_ns: int, n: int = 1) -> None:
+        self.start_ns = min(self.start_ns, timestamp_ns)
+        self.end_ns = max(self.end_ns, timestamp_ns)
+        self.count += n
+        self.counts[topic] = self.counts.get(topic, 0) + n
 
 
-class SplitBagWriter:
-    """Write a rosbag2 directory of MCAP files that stays readable at every split."""
+@dataclass
+class TopicInfo:
+    """A topic as metadata.yaml lists it."""
+
+    name: str
+    type: str
+    offered_qos_profiles: list[Any]  # rosbag2 v9: a list of QoS mappings
+    type_description_hash: str
+    serialization_format: str = "cdr"
+
+
+def open_file_writer(
+    stream: IO[bytes], compression: str, chunk_size: int = CHUNK_SIZE
+) -> McapWriter:
+    writer = McapWriter(stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+    writer.start(profile="ros2", library=LIBRARY)
+    return writer
+
+
+class BagWriter:
+    """Write a rosbag2 directory of chunk-compressed MCAP files."""
 
     def __init__(
-        self, path: str | Path, split_seconds: float = 5.0, split_bytes: int = 256 * 2**20
+        self,
+        path: str | Path,
+        compression: str = "zstd",
+        max_bag_size: int = 0,
+        max_bag_duration_ns: int = 0,
     ) -> None:
+        if compression not in COMPRESSIONS:
+            raise ValueError(
+                f"compression {compression!r} unknown: one of {', '.join(COMPRESSIONS)}"
+            )
+        if max_bag_size < 0 or max_bag_duration_ns < 0:
+            raise ValueError("max_bag_size and max_bag_duration must be >= 0 (0: no split)")
         self.path = Path(path)
         if self.path.exists():
             raise FileExistsError(f"bag {self.path} exists already; choose a new output path")
         self.path.mkdir(parents=True)
-        self.split_seconds = split_seconds
-        self.split_bytes = split_bytes
+        self.compression = compression
+        self.max_bag_size = max_bag_size
+        self.max_bag_duration_ns = max_bag_duration_ns
+        # A file is checked against max_bag_size as its chunks are written: chunks of at most a
+        # quarter of it keep the overshoot small.
+        self.chunk_size = (
+            min(CHUNK_SIZE, max(max_bag_size // 4, 4096)) if max_bag_size else CHUNK_SIZE
+        )
         self.connections: list[Connection] = []
         self._by_topic: dict[str, Connection] = {}
-        self._closed: list[_FileStats] = []
-        self._committed_counts: dict[int, int] = {}
-        self._file: _McapFile | None = None
-        self._stats: _FileStats | None = None
-        self._file_types: set[str] = set()
-        self._file_conns: set[int] = set()
-        self._opened_at = 0.0
-        self._index = 0
+        self._files: list[FileStats] = []
+        self._stream: IO[bytes] | None = None
+        self._mcap: McapWriter | None = None
+        self._stats: FileStats | None = None
+        self._schemas: dict[str, int] = {}  # msgtype -> schema id in the open file
+        self._channels: dict[int, int] = {}  # connection id -> channel id in the open file
+        self._closed = False
         self._write_metadata()
 
     def add_connection(self, topic: str, type_name: str, qos: QosProfile | None = None) -> int:
@@ -125,119 +146,171 @@ class SplitBagWriter:
         )
         self.connections.append(conn)
         self._by_topic[topic] = conn
-        self._committed_counts[conn.id] = 0
         return conn.id
 
     def write(self, connection_id: int, timestamp_ns: int, data: bytes | memoryview) -> None:
-        if self._file is not None and self._should_split():
-            self.split()
-        if self._file is None:
-            self._open_file()
-        assert self._file is not None and self._stats is not None
-        conn = self.connections[connection_id - 1]
-        if conn.msgtype not in self._file_types:
-            self._file.add_msgtype(conn)
-            self._file_types.add(conn.msgtype)
-        if conn.id not in self._file_conns:
-            self._file.add_connection(conn, _qos_yaml(conn))
-            self._file_conns.add(conn.id)
-        self._file.write(conn, timestamp_ns, data)
+        mcap = self._mcap
         stats = self._stats
-        stats.start_ns = min(stats.start_ns, timestamp_ns)
-        stats.end_ns = max(stats.end_ns, timestamp_ns)
-        stats.count += 1
-        stats.counts[conn.id] = stats.counts.get(conn.id, 0) + 1
+        if (
+            mcap is None
+            or stats is None
+            or ((self.max_bag_size or self.max_bag_duration_ns) and self._split_due(timestamp_ns))
+        ):
+            mcap, stats = self._next_file()
+        channel = self._channels.get(connection_id)
+        if channel is None:
+            channel = self._add_channel(self.connections[connection_id - 1])
+        mcap.add_message(channel, timestamp_ns, bytes(data), timestamp_ns)
+        stats.add(self.connections[connection_id - 1].topic, timestamp_ns)
 
-    def _should_split(self) -> bool:
-        assert self._file is not None
-        return (
-            time.monotonic() - self._opened_at >= self.split_seconds
-            or self._file.bio.tell() + self._file.chunk.bio.tell() >= self.split_bytes
+    def _split_due(self, timestamp_ns: int) -> bool:
+        stats = self._stats
+        if stats is None or not stats.count:
+            return False
+        if self.max_bag_duration_ns and timestamp_ns - stats.start_ns >= self.max_bag_duration_ns:
+            return True
+        return bool(self.max_bag_size and self._file_size() >= self.max_bag_size)
+
+    def _file_size(self) -> int:
+        """Bytes of the open file written so far (closed chunks: a file may pass max_bag_size
+        by up to one chunk, a quarter of max_bag_size at most)."""
+        assert self._stream is not None
+        return self._stream.tell()
+
+    def _next_file(self) -> tuple[McapWriter, FileStats]:
+        self._close_file()
+        name = f"{self.path.name}_{len(self._files)}.mcap"
+        self._stream = (self.path / name).open("xb")
+        self._mcap = open_file_writer(self._stream, self.compression, self.chunk_size)
+        self._stats = FileStats(name)
+        self._files.append(self._stats)
+        self._schemas = {}
+        self._channels = {}
+        self._write_metadata()
+        return self._mcap, self._stats
+
+    def _add_channel(self, conn: Connection) -> int:
+        assert self._mcap is not None
+        schema = self._schemas.get(conn.msgtype)
+        if schema is None:
+            schema = self._mcap.register_schema(conn.msgtype, "ros2msg", conn.msgdef.data.encode())
+            self._schemas[conn.msgtype] = schema
+        channel = self._mcap.register_channel(
+            conn.topic,
+            "cdr",
+            schema,
+            {"offered_qos_profiles": _qos_yaml(conn), "topic_type_hash": conn.digest},
         )
+        self._channels[conn.id] = channel
+        return channel
 
-    def maybe_split(self) -> None:
-        """Close the open file if it is due (call from a timer so quiet periods finalise)."""
-        if self._file is not None and self._should_split():
-            self.split()
-
-    def _open_file(self) -> None:
-        name = f"{self.path.name}_{self._index}.mcap"
-        self._index += 1
-        self._file = _McapFile(self.path / name)
-        self._stats = _FileStats(name)
-        self._file_types = set()
-        self._file_conns = set()
-        self._opened_at = time.monotonic()
+    def flush(self) -> None:
+        """Close the open chunk and hand it to the OS: everything written so far survives
+        ``kill -9`` of this process (the recorder calls this every flush_s). metadata.yaml,
+        rewritten whenever a file is opened or closed, lists the open file already; its counts
+        are those of the closed files until :func:`rig_runtime.bag_recover.recover_bag`."""
+        if self._mcap is not None:
+            self._mcap.flush()
 
     def split(self) -> None:
-        """Close the open file and list it in metadata.yaml (it is readable from now on)."""
-        if self._file is None or self._stats is None:
-            return
-        self._file.close(BAG_VERSION, _yaml_dump(self._info(extra=self._stats)))
-        self._closed.append(self._stats)
-        for cid, count in self._stats.counts.items():
-            self._committed_counts[cid] += count
-        self._file = None
-        self._stats = None
+        """Finish the open file (footer, summary); the next message opens a new one."""
+        self._close_file()
         self._write_metadata()
 
+    def _close_file(self) -> None:
+        if self._mcap is not None and self._stream is not None:
+            self._mcap.finish()
+            self._stream.close()
+        self._mcap = None
+        self._stream = None
+        self._stats = None
+
     def close(self) -> None:
-        self.split()
+        if self._closed:
+            return
+        self._close_file()
+        self._closed = True
         self._write_metadata()
 
     @property
     def message_count(self) -> int:
-        return sum(self._committed_counts.values()) + (self._stats.count if self._stats else 0)
+        return sum(f.count for f in self._files)
 
-    def _info(self, extra: _FileStats | None = None) -> dict[str, Any]:
-        files = [*self._closed, *([extra] if extra else [])]
-        counts = dict(self._committed_counts)
-        if extra:
-            for cid, count in extra.counts.items():
-                counts[cid] = counts.get(cid, 0) + count
-        written = [f for f in files if f.count]
-        start = min((f.start_ns for f in written), default=0)
-        end = max((f.end_ns for f in written), default=0)
-        return {
-            "version": BAG_VERSION,
-            "storage_identifier": "mcap",
-            "relative_file_paths": [f.name for f in files],
-            "duration": {"nanoseconds": max(0, end - start)},
-            "starting_time": {"nanoseconds_since_epoch": start},
-            "message_count": sum(f.count for f in files),
-            "topics_with_message_count": [
-                {
-                    "topic_metadata": {
-                        "name": c.topic,
-                        "type": c.msgtype,
-                        "serialization_format": "cdr",
-                        "offered_qos_profiles": dump_qos_v9(c.ext.offered_qos_profiles),  # type: ignore[union-attr]
-                        "type_description_hash": c.digest,
-                    },
-                    "message_count": counts.get(c.id, 0),
-                }
-                for c in self.connections
-            ],
-            "compression_format": "",
-            "compression_mode": "",
-            "files": [
-                {
-                    "path": f.name,
-                    "starting_time": {"nanoseconds_since_epoch": f.start_ns if f.count else 0},
-                    "duration": {"nanoseconds": max(0, f.end_ns - f.start_ns) if f.count else 0},
-                    "message_count": f.count,
-                }
-                for f in files
-            ],
-            "custom_data": None,
-            "ros_distro": "jazzy",
-        }
+    @property
+    def files(self) -> list[str]:
+        return [f.name for f in self._files]
+
+    def topics(self) -> list[TopicInfo]:
+        return [
+            TopicInfo(
+                c.topic,
+                c.msgtype,
+                dump_qos_v9(c.ext.offered_qos_profiles),  # type: ignore[union-attr]
+                c.digest,
+            )
+            for c in self.connections
+        ]
 
     def _write_metadata(self) -> None:
-        text = _yaml_dump({"rosbag2_bagfile_information": self._info()})
-        tmp = self.path / "metadata.yaml.tmp"
-        tmp.write_text(text)
-        tmp.replace(self.path / "metadata.yaml")
+        write_metadata(self.path, self._files, self.topics())
+
+
+def bag_info(files: Sequence[FileStats], topics: Sequence[TopicInfo]) -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` mapping of metadata.yaml (version 9, Jazzy)."""
+    written = [f for f in files if f.count]
+    start = min((f.start_ns for f in written), default=0)
+    end = max((f.end_ns for f in written), default=0)
+    counts: dict[str, int] = {}
+    for f in files:
+        for topic, n in f.counts.items():
+            counts[topic] = counts.get(topic, 0) + n
+    return {
+        "version": BAG_VERSION,
+        "storage_identifier": "mcap",
+        "relative_file_paths": [f.name for f in files],
+        "duration": {"nanoseconds": max(0, end - start)},
+        "starting_time": {"nanoseconds_since_epoch": start},
+        "message_count": sum(f.count for f in files),
+        "topics_with_message_count": [
+            {
+                "topic_metadata": {
+                    "name": t.name,
+                    "type": t.type,
+                    "serialization_format": t.serialization_format,
+                    "offered_qos_profiles": t.offered_qos_profiles,
+                    "type_description_hash": t.type_description_hash,
+                },
+                "message_count": counts.get(t.name, 0),
+            }
+            for t in topics
+        ],
+        # rosbag2's own (file/message) compression: none. The MCAP chunks carry theirs.
+        "compression_format": "",
+        "compression_mode": "",
+        "files": [
+            {
+                "path": f.name,
+                "starting_time": {"nanoseconds_since_epoch": f.start_ns if f.count else 0},
+                "duration": {"nanoseconds": max(0, f.end_ns - f.start_ns) if f.count else 0},
+                "message_count": f.count,
+            }
+            for f in files
+        ],
+        "custom_data": None,
+        "ros_distro": "jazzy",
+    }
+
+
+def write_metadata(bag: Path, files: Sequence[FileStats], topics: Sequence[TopicInfo]) -> None:
+    """Write metadata.yaml atomically (temp file + rename)."""
+    text = _yaml_dump({"rosbag2_bagfile_information": bag_info(files, topics)})
+    tmp = bag / "metadata.yaml.tmp"
+    tmp.write_text(text)
+    tmp.replace(bag / "metadata.yaml")
+
+
+# The name of the writer before splits became optional.
+SplitBagWriter = BagWriter
 
 
 def _qos_yaml(conn: Connection) -> str:

@@ -4,15 +4,18 @@ Records the listed topics (or every topic with a publisher when ``topics`` is em
 CDR, with the Jazzy type hash and the offered QoS in metadata.yaml, like
 ``ros2 bag record -s mcap``. Readers match the offered QoS (transient-local topics are
 recorded from their last latched sample; reliable topics with keep-all history so nothing is
-dropped under load). Finalised on SIGINT/SIGTERM; after ``kill -9`` the bag is readable up to
-the last closed split (at most ``split_seconds`` of data lost, see bag.py).
+dropped under load). Chunks are zstd-compressed (``compression``); one file per bag unless
+``max_bag_size`` / ``max_bag_duration`` ask for splits. Finalised on SIGINT/SIGTERM; the open
+chunk is written every ``flush_s``, so after ``kill -9`` the bag is readable up to its last
+chunk (at most ``flush_s`` of data lost; ``aero-rig bag recover`` restores the footer, see
+bag.py).
 """
 
 import sys
 from pathlib import Path
 from typing import Any
 
-from .bag import SplitBagWriter
+from .bag import COMPRESSIONS, BagWriter
 from .node import Node, run_node
 from .params import Parameter
 from .qos import QosProfile
@@ -27,10 +30,31 @@ PARAMETERS = [
     ),
     Parameter("exclude", ["/rosout", "/parameter_events"], "topics never recorded"),
     Parameter(
-        "split_seconds",
-        5.0,
-        "close and list a bag file this often [s]: the most a kill -9 can lose",
-        min=0.1,
+        "compression",
+        "zstd",
+        "MCAP chunk compression: zstd (default), lz4 (faster, larger) or none",
+        choices=tuple(COMPRESSIONS),
+    ),
+    Parameter(
+        "max_bag_size",
+        0,
+        "start a new bag file once the open one holds this many bytes (it may pass it by up to "
+        "one chunk); 0 = no size split (default, like ros2 bag record)",
+        min=0,
+    ),
+    Parameter(
+        "max_bag_duration",
+        0.0,
+        "start a new bag file once the open one spans this many seconds of recorded time; "
+        "0 = no duration split (default, like ros2 bag record)",
+        min=0.0,
+    ),
+    Parameter(
+        "flush_s",
+        1.0,
+        "write the open chunk and metadata.yaml at least this often [s]: the most a kill -9 "
+        "can lose",
+        min=0.01,
         max=3600.0,
     ),
     Parameter("discovery_period_s", 0.2, "how often to look for new topics [s]", min=0.01),
@@ -53,7 +77,13 @@ class Recorder:
         self.node = node
         self.wanted = [node.resolve_topic(t) for t in node.params["topics"]]
         self.exclude = set(node.params["exclude"])
-        self.writer = SplitBagWriter(Path(output), split_seconds=node.params["split_seconds"])
+        p = node.params
+        self.writer = BagWriter(
+            Path(output),
+            compression=p["compression"],
+            max_bag_size=p["max_bag_size"],
+            max_bag_duration_ns=round(p["max_bag_duration"] * 1e9),
+        )
         self.subscriptions: dict[str, Any] = {}
         # The start barrier waits until each of these topics that a member publishes is recorded.
         node.set_records(self.wanted or ["*"], sorted(self.exclude))
@@ -62,7 +92,7 @@ class Recorder:
         )
         self._discover()
         node.create_timer(node.params["discovery_period_s"], self._discover)
-        node.create_timer(min(1.0, node.params["split_seconds"] / 2), self.writer.maybe_split)
+        node.create_timer(p["flush_s"], self.writer.flush)
 
     def _discover(self) -> None:
         for topic, (type_name, offered) in self.node.topic_types().items():
@@ -125,7 +155,10 @@ class Recorder:
             )
         self.writer.close()
         self.node.logger.info(
-            "bag %s finalised: %d messages", self.writer.path, self.writer.message_count
+            "bag %s finalised: %d messages in %s",
+            self.writer.path,
+            self.writer.message_count,
+            ", ".join(self.writer.files) or "no file",
         )
 
 
