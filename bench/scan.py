@@ -136,7 +136,7 @@ def main() -> None:
     same = serial.best_index == parallel.best_index == remote.best_index == threaded.best_index
     best = serial.best_row
     print(f"selected: nx={best.nx}, degrees {list(best.degrees)}, {best.equations}; "
-          f"same in all three runs: {same}")  # fmt: skip
+          f"same in every run: {same}")  # fmt: skip
     print(json.dumps({
         "candidates": len(serial.rows),
         "training_samples": int(train.N * train.P),

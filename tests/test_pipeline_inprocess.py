@@ -63,10 +63,11 @@ def test_identification_of_the_short_campaign(campaign) -> None:
 
 def test_refits_reuse_unchanged_models_exactly(campaign) -> None:
     asm = _assemble(campaign)
-    first = identify(asm, IdentificationConfig())
-    again = identify(asm, IdentificationConfig(), previous=first)
+    single = IdentificationConfig(scan=False)  # the final scan is tested below
+    first = identify(asm, single)
+    again = identify(asm, single, previous=first)
     assert again.pnlss_level1 is first.pnlss_level1  # level 1 unchanged: not refitted
-    validated = identify(asm, IdentificationConfig(), final=True, models_from=first)
+    validated = identify(asm, single, final=True, models_from=first)
     assert validated.pnlss_all is first.pnlss_all
     assert (
         validated.errors_all == first.errors_all and validated.errors_level1 == first.errors_level1
@@ -260,6 +261,13 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     assert ("PNLSS", "high", 1.0) in result.errors_all
     interim = identify(asm, config)  # online refits keep the single structure
     assert interim.scan is None and interim.pnlss_all is not None
+    # The final identification after a sine-only refit still runs the scan (the online node's
+    # last refit reused the models of an online refit, which had none) ...
+    final = identify(asm, config, final=True, models_from=interim)
+    assert final.scan is not None and final.pnlss_all is final.scan.best
+    # ... and a re-validation of a scanned result reuses it.
+    again = identify(asm, config, final=True, models_from=final)
+    assert again.scan is final.scan and again.pnlss_all is final.pnlss_all
     written = write_report(result, asm, tmp_path)
     assert (tmp_path / "pnlss_scan.md").read_text().count("(selected)") == 1
     assert (tmp_path / "pnlss_scan.csv").read_text().count("\n") == 9

@@ -232,6 +232,10 @@ def identify(
     identification only); None: local worker processes.
     """
     config = config or IdentificationConfig()
+    if final and config.scan and models_from is not None and models_from.scan is None:
+        # The final models come from the structure scan, which the online refits skip: the
+        # multisine data did not change, but the all-levels PNLSS must still be chosen.
+        models_from = None
     fs = assembler.fs
     result = IdentificationResult(config=config, fs=fs, complete=final)
     names = _level_names(assembler)
@@ -242,6 +246,7 @@ def identify(
         result.levels = models_from.levels
         result.linear_level1 = models_from.linear_level1
         result.pnlss_all = models_from.pnlss_all
+        result.scan = models_from.scan
         result.pnlss_level1 = models_from.pnlss_level1
         result.level1_signature = models_from.level1_signature
         result.warnings = [w for w in models_from.warnings if not w.startswith("sine ")]
