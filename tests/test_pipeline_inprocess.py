@@ -256,7 +256,9 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
         scan=True, scan_nx=(1, 2), scan_degrees=((2,), (2, 3)), scan_max_iter=10, scan_workers=1
     )
     result = identify(asm, config, final=True)
-    assert result.scan is not None and len(result.scan.rows) == 2 * 2 * 2
+    # nx × degree sets × equations × the two LM starts (linear, output least squares)
+    assert result.scan is not None and len(result.scan.rows) == 2 * 2 * 2 * 2
+    assert {r.start for r in result.scan.rows} == {"linear", "output_ls"}
     assert result.pnlss_all is result.scan.best
     assert ("PNLSS", "high", 1.0) in result.errors_all
     interim = identify(asm, config)  # online refits keep the single structure
@@ -270,7 +272,7 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     assert again.scan is final.scan and again.pnlss_all is final.pnlss_all
     written = write_report(result, asm, tmp_path)
     assert (tmp_path / "pnlss_scan.md").read_text().count("(selected)") == 1
-    assert (tmp_path / "pnlss_scan.csv").read_text().count("\n") == 9
+    assert (tmp_path / "pnlss_scan.csv").read_text().count("\n") == 17
     assert written["pnlss_scan_plot"].stat().st_size > 10_000
     payload = json.loads((tmp_path / "models.json").read_text())
     assert sum(row["selected"] for row in payload["pnlss_scan"]["table"]) == 1

@@ -27,7 +27,8 @@ class IdentificationConfig:
     # level-1 BLA's subspace model of that order and scored on the validation realization;
     # the one-standard-error rule keeps the simplest adequate model. Online refits keep the
     # single structure (they must stay fast). Default grid: nx ≤ 2, since an nx = 3 candidate
-    # with degrees 2-5 costs 15-30 s alone on two cores (README, "PNLSS structure scan").
+    # with degrees 2-5 costs 15-30 s alone on two cores (README, "PNLSS structure scan"). Each
+    # structure is tried from two LM starts (scan.STARTS).
     scan: bool = True
     scan_nx: tuple[int, ...] = (1, 2)
     scan_degrees: tuple[tuple[int, ...], ...] = ((2,), (2, 3), (2, 3, 4, 5))

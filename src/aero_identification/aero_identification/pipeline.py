@@ -19,7 +19,6 @@ dropped), like the measured data.
 """
 
 import json
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +33,7 @@ from .config import IdentificationConfig
 from .data import PeriodicData, random_phase_period
 from .metrics import predict_bla_sine, relative_rms_error
 from .models import LinearStateSpace, PNLSSModel
-from .pnlss import fit_pnlss, linear_states, periodic_records
+from .pnlss import fit_pnlss, output_equation_start
 from .quality import data_quality, data_quality_lines, data_quality_note
 from .scan import ScanResult, scan_pnlss
 from .subspace import fit_linear_ss
@@ -436,6 +435,7 @@ def _scan_pnlss(
             workers=config.scan_workers or None,
             record_weights=_level_weights(data, config.level_weighting),
             validation_weights=_level_weights(validation, config.level_weighting),
+            starts=("linear", "output_ls"),  # the latter: the single-structure fit's start
         )
     except (ValueError, OSError) as exc:  # OSError: the Dask scheduler cannot be reached
         result.warnings.append(f"PNLSS structure scan failed: {exc}")
@@ -539,47 +539,11 @@ def _output_equation_start(
     weights: np.ndarray | None = None,
     val_weights: np.ndarray | None = None,
 ) -> PNLSSModel:
-    """A PNLSS start whose output equation already holds the static nonlinearity.
-
-    With E = 0 the states are those of the linear model, and y is linear in (C, D, F, offset):
-    one least-squares solve on the steady-state states of every training period gives them
-    (the usual PNLSS initialisation puts F = 0, Paduart et al. 2010 §4; here the lift curve's
-    curvature over several offsets is far from linear, and LM starts much closer this way).
-    """
-    from dataclasses import replace
-
-    from .monomials import evaluate_monomials
-
-    base = fit_pnlss(
-        data, lin, degrees=config.degrees, structure=config.structure, max_iter=0,
-        validation=validation, record_weights=weights, validation_weights=val_weights,
+    """The pipeline's PNLSS start (pnlss.output_equation_start) with the config's structure."""
+    return output_equation_start(
+        data, lin, degrees=config.degrees, structure=config.structure, validation=validation,
+        record_weights=weights, validation_weights=val_weights,
     )  # fmt: skip
-    nx = base.nx
-    un_all = (data.u - base.u_mean[0]) / base.u_scale[0]
-    # Steady-state states of every period: one whole period of its input simulated first.
-    states = linear_states(base.A, base.B, periodic_records(un_all, data.N))[:, data.N :]
-    rows, targets = [], []
-    for m in range(data.M):
-        for p in range(data.P):
-            un = un_all[:, p, m]
-            x = states[m * data.P + p]
-            z = np.column_stack([x, un])
-            eta = evaluate_monomials(z, base.exponents_output)
-            # Weighted least squares: record r's rows and target scaled by √w_r.
-            sw = 1.0 if weights is None else math.sqrt(weights[m * data.P + p])
-            rows.append(sw * np.column_stack([x, un, eta, np.ones(data.N)]))
-            targets.append(sw * (data.y[:, p, m] - base.y_mean[0]) / base.y_scale[0])
-    R, t = np.vstack(rows), np.concatenate(targets)
-    scale = np.maximum(np.sqrt(np.mean(R**2, axis=0)), 1e-12)
-    theta = np.linalg.lstsq(R / scale, t, rcond=None)[0] / scale
-    k = base.exponents_output.shape[0]
-    return replace(
-        base,
-        C=theta[:nx].reshape(1, nx),
-        D=theta[nx : nx + 1].reshape(1, 1),
-        F=theta[nx + 1 : nx + 1 + k].reshape(1, k),
-        y_mean=base.y_mean + base.y_scale * theta[-1],
-    )
 
 
 def _validate_on_sines(

@@ -495,6 +495,63 @@ def fit_pnlss(
     )  # fmt: skip
 
 
+def output_equation_start(
+    data: PeriodicData,
+    lin: LinearStateSpace,
+    degrees: Sequence[int] = (2, 3),
+    structure: str = "full",
+    validation: PeriodicData | None = None,
+    *,
+    equations: str = "state+output",
+    record_weights: np.ndarray | None = None,
+    validation_weights: np.ndarray | None = None,
+) -> PNLSSModel:
+    """A PNLSS start whose output equation already holds the static nonlinearity.
+
+    With E = 0 the states are those of the linear model, and y is linear in (C, D, F, offset):
+    one least-squares solve on the steady-state states of every training period gives them
+    (the usual PNLSS initialisation puts F = 0, Paduart et al. 2010 §4; here the lift curve's
+    curvature over several offsets is far from linear, and LM starts much closer this way).
+    With ``equations="state"`` (no F) the same solve refits C, D and the offset. Pass the
+    result to `fit_pnlss(..., initial_model=...)`.
+    """
+    from dataclasses import replace
+
+    from .monomials import evaluate_monomials
+
+    weights = record_weights
+    base = fit_pnlss(
+        data, lin, degrees=degrees, structure=structure, max_iter=0, validation=validation,
+        equations=equations, record_weights=weights, validation_weights=validation_weights,
+    )  # fmt: skip
+    nx = base.nx
+    un_all = (data.u - base.u_mean[0]) / base.u_scale[0]
+    # Steady-state states of every period: one whole period of its input simulated first.
+    states = linear_states(base.A, base.B, periodic_records(un_all, data.N))[:, data.N :]
+    rows, targets = [], []
+    for m in range(data.M):
+        for p in range(data.P):
+            un = un_all[:, p, m]
+            x = states[m * data.P + p]
+            z = np.column_stack([x, un])
+            eta = evaluate_monomials(z, base.exponents_output)
+            # Weighted least squares: record r's rows and target scaled by √w_r.
+            sw = 1.0 if weights is None else math.sqrt(weights[m * data.P + p])
+            rows.append(sw * np.column_stack([x, un, eta, np.ones(data.N)]))
+            targets.append(sw * (data.y[:, p, m] - base.y_mean[0]) / base.y_scale[0])
+    R, t = np.vstack(rows), np.concatenate(targets)
+    scale = np.maximum(np.sqrt(np.mean(R**2, axis=0)), 1e-12)
+    theta = np.linalg.lstsq(R / scale, t, rcond=None)[0] / scale
+    k = base.exponents_output.shape[0]
+    return replace(
+        base,
+        C=theta[:nx].reshape(1, nx),
+        D=theta[nx : nx + 1].reshape(1, 1),
+        F=theta[nx + 1 : nx + 1 + k].reshape(1, k),
+        y_mean=base.y_mean + base.y_scale * theta[-1],
+    )
+
+
 def lm_directions(
     J: np.ndarray, n_par: int, rank_cap: int, solver: str = "qr"
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

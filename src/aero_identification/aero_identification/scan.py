@@ -47,7 +47,7 @@ import numpy as np
 from .data import PeriodicData
 from .models import LinearStateSpace, PNLSSModel
 from .monomials import STRUCTURES, check_degrees
-from .pnlss import EQUATIONS, fit_pnlss
+from .pnlss import EQUATIONS, fit_pnlss, output_equation_start
 
 __all__ = ["Candidate", "ScanResult", "ScanRow", "candidate_grid", "scan_pnlss"]
 
@@ -62,6 +62,10 @@ class Candidate:
     degrees: tuple[int, ...]
     equations: str
     structure: str = "full"
+    start: str = "linear"
+
+
+STARTS = ("linear", "output_ls")
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,7 @@ class ScanRow:
     training_error: float
     fit_seconds: float
     status: str  # "ok" or what went wrong
+    start: str = "linear"
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -114,16 +119,17 @@ class ScanResult:
 
     def to_markdown(self) -> str:
         head = (
-            "| nx | degrees | equations | structure | parameters | validation error | SE "
-            "| training error | fit s | status |\n|---|---|---|---|---|---|---|---|---|---|\n"
+            "| nx | degrees | equations | structure | start | parameters | validation error | SE "
+            "| training error | fit s | status |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
         )
         lines = []
         for i, r in enumerate(self.rows):
             mark = " **(selected)**" if i == self.best_index else ""
             lines.append(
                 f"| {r.nx} | {','.join(map(str, r.degrees))} | {r.equations} | {r.structure} "
-                f"| {r.n_params} | {_fmt(r.validation_error)}{mark} | {_fmt(r.validation_se)} "
-                f"| {_fmt(r.training_error)} | {r.fit_seconds:.1f} | {r.status} |"
+                f"| {r.start} | {r.n_params} | {_fmt(r.validation_error)}{mark} "
+                f"| {_fmt(r.validation_se)} | {_fmt(r.training_error)} | {r.fit_seconds:.1f} "
+                f"| {r.status} |"
             )
         return head + "\n".join(lines) + f"\n\nRule: {self.rule}\n"
 
@@ -145,9 +151,14 @@ def candidate_grid(
     degrees: Iterable[Sequence[int]] = ((2,), (2, 3), (2, 3, 4, 5)),
     equations: Iterable[str] = EQUATIONS,
     structures: Iterable[str] = ("full",),
+    starts: Iterable[str] = ("linear",),
 ) -> list[Candidate]:
-    """Every combination, checked (orders ≥ 1, valid degrees, equations and structures)."""
-    out = []
+    """Every combination, checked (orders ≥ 1, valid degrees, equations, structures, starts)."""
+    starts = tuple(starts)
+    for st in starts:
+        if st not in STARTS:
+            raise ValueError(f"unknown start {st!r}; choose from {STARTS}")
+    out: list[Candidate] = []
     for n in nx:
         if int(n) < 1:
             raise ValueError(f"state orders must be >= 1; got {n}")
@@ -158,7 +169,7 @@ def candidate_grid(
                 for s in structures:
                     if s not in STRUCTURES:
                         raise ValueError(f"unknown structure {s!r}; choose from {STRUCTURES}")
-                    out.append(Candidate(int(n), check_degrees(d), eq, s))
+                    out.extend(Candidate(int(n), check_degrees(d), eq, s, st) for st in starts)
     if not out:
         raise ValueError("the scan grid is empty")
     return out
@@ -178,6 +189,7 @@ def scan_pnlss(
     workers: int | None = None,
     record_weights: np.ndarray | None = None,
     validation_weights: np.ndarray | None = None,
+    starts: Iterable[str] = ("linear",),
 ) -> ScanResult:
     """Fit every candidate PNLSS structure and select one by cross-validation (module docs).
 
@@ -195,6 +207,12 @@ def scan_pnlss(
             this process, one after the other).
         record_weights, validation_weights: per-period weights of the training cost and of the
             validation score (fit_pnlss); e.g. 1/var(y) per level for records of several levels.
+        starts: the LM starts to try for every structure (each a candidate of its own, same
+            parameter count, so the rule keeps the better on validation): "linear" (E = F = 0,
+            Paduart et al. 2010 §4) and/or "output_ls" (C, D, F and the offset by least
+            squares on the linear model's states, pnlss.output_equation_start: the campaign
+            pipeline's start, for outputs with a strong static nonlinearity such as lift over
+            several offsets).
 
     Returns:
         A ScanResult: `.best` (the selected PNLSSModel, with `.simulate(u)`), `.table`,
@@ -211,7 +229,7 @@ def scan_pnlss(
         )
     if max_iter < 1:
         raise ValueError(f"max_iter must be >= 1; got {max_iter}")
-    grid = candidate_grid(nx, degrees, equations, structures)
+    grid = candidate_grid(nx, degrees, equations, structures, starts)
     linears = _linear_models(data, sorted({c.nx for c in grid}), linear)
     jobs = [(c, linears[c.nx]) for c in grid]
     options = {
@@ -325,7 +343,7 @@ def _on_client(
     return [futures[i].result() for i in range(len(jobs))]
 
 
-def _size(c: Candidate) -> int:
+def _size(c: Candidate) -> int:  # relative cost, for the order of submission
     return c.nx * (c.nx + 1) * sum(c.degrees) * (2 if c.equations == "state+output" else 1)
 
 
@@ -344,6 +362,13 @@ def fit_candidate(
         numba.set_num_threads(int(threads))  # this thread's kernels (a Dask worker's task)
     t0 = time.perf_counter()
     try:
+        initial = None
+        if candidate.start == "output_ls":
+            initial = output_equation_start(
+                data, lin, candidate.degrees, candidate.structure, validation,
+                equations=candidate.equations, record_weights=options.get("record_weights"),
+                validation_weights=options.get("validation_weights"),
+            )  # fmt: skip
         model = fit_pnlss(
             data,
             lin,
@@ -354,6 +379,7 @@ def fit_candidate(
             validation=validation,
             record_weights=options.get("record_weights"),
             validation_weights=options.get("validation_weights"),
+            initial_model=initial,
         )
         val, se = periodic_error(model, validation, options.get("validation_weights"))
         train, _ = periodic_error(model, data, options.get("record_weights"))
@@ -372,6 +398,7 @@ def fit_candidate(
         train,
         time.perf_counter() - t0,
         status,
+        candidate.start,
     )
     return row, model
 

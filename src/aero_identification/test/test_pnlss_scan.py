@@ -94,6 +94,11 @@ def test_grid_is_checked() -> None:
         candidate_grid(equations=("output",))
     with pytest.raises(ValueError, match="state orders"):
         candidate_grid(nx=(0,))
+    with pytest.raises(ValueError, match="unknown start"):
+        candidate_grid(starts=("random",))
+    both = candidate_grid(nx=(1,), degrees=((2,),), equations=("state",),
+                          starts=("linear", "output_ls"))  # fmt: skip
+    assert [c.start for c in both] == ["linear", "output_ls"]
 
 
 @pytest.mark.slow  # starts a local Dask cluster (worker processes)
