@@ -272,11 +272,11 @@ def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
 
 
 def test_fit_of_bag_without_needed_topics_names_them(tmp_path: Path) -> None:
-    from rig_runtime.bag import SplitBagWriter
+    from rig_runtime.bag import BagWriter
     from rig_runtime.messages import new_message, serialize
 
     bag = tmp_path / "partial"
-    writer = SplitBagWriter(bag)
+    writer = BagWriter(bag)
     conn = writer.add_connection(PITCH_STATE.name, "sensor_msgs/msg/JointState")
     writer.write(conn, 1, serialize(new_message("sensor_msgs/msg/JointState", position=[0.1])))
     writer.close()

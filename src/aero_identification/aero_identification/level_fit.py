@@ -18,7 +18,6 @@ independent of the training periods, same excitation). The validation levels are
 any fit, so their errors are honest test errors.
 """
 
-import contextlib
 import csv
 import io
 import json
@@ -34,10 +33,10 @@ import numpy as np
 from aero_identification.bla import BLA, estimate_bla
 from aero_identification.config import IdentificationConfig
 from aero_identification.data import PeriodicData, transient_periods
-from aero_identification.metrics import relative_rms_error
+from aero_identification.metrics import relative_rms_error, steady_state_response
 from aero_identification.models import LinearStateSpace, PNLSSModel
 from aero_identification.monomials import structure_exponents
-from aero_identification.pnlss import fit_pnlss
+from aero_identification.pnlss import fit_pnlss, one_blas_thread
 from aero_identification.records import LevelRecord, matches_level
 from aero_identification.subspace import fit_linear_ss
 
@@ -50,20 +49,6 @@ MAX_JACOBIAN_BYTES = 1_000_000_000
 DEFAULT_MAX_ORDER = 12  # highest order of the linear order scan
 
 NonlinearFit = Callable[..., PNLSSModel]
-
-
-def _one_blas_thread() -> contextlib.AbstractContextManager[Any]:
-    """BLAS limited to one thread (no-op without threadpoolctl, a scikit-learn dependency).
-
-    Measured on the 2-core machine with busy neighbours: the order-10 subspace fit and its
-    refinement of one F-16 level took 0.6 s with one OpenBLAS thread and 8.5 s (up to 70 s)
-    with two, which wait for each other's core.
-    """
-    try:
-        from threadpoolctl import ThreadpoolController
-    except ImportError:  # pragma: no cover
-        return contextlib.nullcontext()
-    return ThreadpoolController().limit(limits=1, user_api="blas")
 
 
 @dataclass
@@ -243,12 +228,6 @@ class ScanFit:
         return self.result.best
 
 
-def _steady_state(model: Any, u_record: np.ndarray, N: int) -> np.ndarray:
-    """Simulate a periodic record in steady state: its last period prepended, then dropped."""
-    u_ext = np.concatenate([u_record[-N:], u_record])
-    return np.asarray(model.simulate(u_ext))[N:]
-
-
 def _record_error(model: Any, data: PeriodicData, centred: bool) -> float:
     """Relative RMS error over every realization's kept periods (steady-state simulation).
     Linear models map deviations: with ``centred`` they are put at the record's means."""
@@ -257,7 +236,7 @@ def _record_error(model: Any, data: PeriodicData, centred: bool) -> float:
         u = data.u[:, :, m].T.reshape(-1)
         y = data.y[:, :, m].T.reshape(-1)
         mod = model.with_operating_point(u.mean(), y.mean()) if centred else model
-        y_hat = _steady_state(mod, u, data.N)
+        y_hat = steady_state_response(mod, u, data.N)
         if not np.all(np.isfinite(y_hat)):
             return math.inf
         e = relative_rms_error(y, y_hat)
@@ -337,7 +316,7 @@ def identify_levels(
     Returns:
         LevelFitResult; `errors` has one row per validation level.
     """
-    with _one_blas_thread():
+    with one_blas_thread():
         return _identify_levels(
             records, estimation, validation, nx, max_order, pnlss, pnlss_options,
             fit_nonlinear, log,

@@ -1,5 +1,7 @@
 """Validation metrics and the nonparametric BLA's prediction of single-sine responses."""
 
+from typing import Any
+
 import numpy as np
 
 from aero_identification.bla import BLA
@@ -97,3 +99,10 @@ def predict_bla_sine(
     G = complex(interpolate_frf(bla, freq_hz))
     t = np.arange(np.asarray(u).size) / fs
     return y_mean + np.real(G * amplitude * np.exp(2j * np.pi * freq_hz * t))
+
+
+def steady_state_response(model: Any, u: np.ndarray, samples_per_period: int) -> np.ndarray:
+    """A model's periodic steady-state output to the periodic record ``u``: the record's last
+    period is simulated first (the start-up transient) and dropped from the output."""
+    u_ext = np.concatenate([u[-samples_per_period:], u])
+    return np.asarray(model.simulate(u_ext))[samples_per_period:]

@@ -31,7 +31,7 @@ from .campaign import CampaignAssembler, PeriodBlock, SineRecord
 from .clustering import ClusterResult, period_clusters
 from .config import IdentificationConfig
 from .data import PeriodicData, random_phase_period
-from .metrics import predict_bla_sine, relative_rms_error
+from .metrics import predict_bla_sine, relative_rms_error, steady_state_response
 from .models import LinearStateSpace, PNLSSModel
 from .pnlss import fit_pnlss, output_equation_start
 from .quality import data_quality, data_quality_lines, data_quality_note
@@ -205,12 +205,6 @@ def _periodic(blocks: list[PeriodBlock], fs: float, lines: np.ndarray, count: in
 def _excited_lines(assembler: CampaignAssembler, level: int, realization: int) -> np.ndarray:
     lv = next(x for x in assembler.plan["levels"] if x["level"] == level)
     return np.asarray(lv["realizations"][realization]["excited_lines"], dtype=int)
-
-
-def _steady_state(model: Any, u: np.ndarray, spp: int) -> np.ndarray:
-    """Simulate in periodic steady state: prepend the last period, drop it from the output."""
-    u_ext = np.concatenate([u[-spp:], u])
-    return np.asarray(model.simulate(u_ext))[spp:]
 
 
 def identify(
@@ -577,7 +571,7 @@ def _validate_on_sines(
             y_frf = predict_bla_sine(lin_level.bla, rec.frequency_hz, rec.u, y_mean)
             errors[("BLA FRF", name, f)] = relative_rms_error(rec.y, y_frf)
             lin = lin_level.linear.with_operating_point(u_mean, y_mean)
-            y_ss = _steady_state(lin, rec.u, rec.samples_per_period)
+            y_ss = steady_state_response(lin, rec.u, rec.samples_per_period)
             errors[("BLA SS", name, f)] = relative_rms_error(rec.y, y_ss)
             preds[key] = y_ss
         for model, errors, key in (
@@ -586,7 +580,7 @@ def _validate_on_sines(
         ):
             if model is None:
                 continue
-            y_hat = _steady_state(model, rec.u, rec.samples_per_period)
+            y_hat = steady_state_response(model, rec.u, rec.samples_per_period)
             errors[("PNLSS", name, f)] = (
                 relative_rms_error(rec.y, y_hat) if np.all(np.isfinite(y_hat)) else float("inf")
             )

@@ -39,12 +39,13 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
 from .data import PeriodicData
+from .metrics import steady_state_response
 from .models import LinearStateSpace, PNLSSModel
 from .monomials import STRUCTURES, check_degrees
 from .pnlss import EQUATIONS, fit_pnlss, output_equation_start
@@ -100,7 +101,6 @@ class ScanResult:
     rule: str
     seconds: float = 0.0
     workers: str = ""
-    selected_by: list[str] = field(default_factory=list)
 
     @property
     def best(self) -> PNLSSModel:
@@ -416,7 +416,7 @@ def periodic_error(
     e2 = np.empty((M, P))
     for m in range(M):
         u_period = data.u[:, :, m].mean(axis=1)  # the periods of a realization share the input
-        y_hat = model.simulate(np.tile(u_period, 2))[N:]
+        y_hat = steady_state_response(model, u_period, N)
         if not np.all(np.isfinite(y_hat)):
             return math.inf, math.nan
         for p in range(P):

@@ -309,10 +309,6 @@ def write_metadata(bag: Path, files: Sequence[FileStats], topics: Sequence[Topic
     tmp.replace(bag / "metadata.yaml")
 
 
-# The name of the writer before splits became optional.
-SplitBagWriter = BagWriter
-
-
 def _qos_yaml(conn: Connection) -> str:
     return _yaml_dump(dump_qos_v9(conn.ext.offered_qos_profiles)).strip()  # type: ignore[union-attr]
 

@@ -38,7 +38,6 @@ __all__ = [
     "WING_COEFFICIENTS",
     "Topic",
     "joint_position",
-    "topic_by_name",
 ]
 
 
@@ -161,14 +160,6 @@ RECORDED_TOPICS: tuple[Topic, ...] = (
 # Joint names in sensor_msgs/JointState.
 PITCH_JOINT = "pitch"  # the wing's pitch angle (geometric angle of attack) [rad]
 ALPHA_TRUE_JOINT = "alpha_true"  # simulation only: the plant's true angle [rad]
-
-
-def topic_by_name(name: str) -> Topic:
-    """The contract's entry for a topic name; KeyError naming the known topics."""
-    for topic in TOPICS:
-        if topic.name == name:
-            return topic
-    raise KeyError(f"{name!r} is not a topic of the rig; known: {[t.name for t in TOPICS]}")
 
 
 def joint_position(msg: Any, name: str = PITCH_JOINT) -> float | None:

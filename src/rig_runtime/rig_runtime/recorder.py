@@ -124,21 +124,17 @@ class Recorder:
         """Recorded topics that still have a publisher other than this node itself (every
         node writes /graph/ready and /experiment/anomaly, the recorder too)."""
         endpoints = self.node.readiness_report().endpoints
-        own = {e.gid for e in endpoints if e.kind == "writer"}
-        own_count: dict[str, int] = {}
-        for e in endpoints:
-            if e.kind == "writer":
-                own_count[e.topic] = own_count.get(e.topic, 0) + 1
+        writers = [e for e in endpoints if e.kind == "writer"]
+        own = {e.gid for e in writers}
         out = []
         for e in endpoints:
             if e.kind != "reader" or e.topic not in self.subscriptions:
                 continue
-            others: set[str] | set[int]
             if e.matched is not None:
-                others = set(e.matched) - own
-            else:  # rclpy: counts only
-                others = set(range(e.matched_count - own_count.get(e.topic, 0)))
-            if others:
+                others = len(set(e.matched) - own)
+            else:  # rclpy: matched counts only
+                others = e.matched_count - sum(w.topic == e.topic for w in writers)
+            if others > 0:
                 out.append(e.topic)
         return out
 
