@@ -4,7 +4,9 @@ Dynamic stall varies from cycle to cycle, so periods of the same excitation can 
 different flow regimes. As in the paper (§3.4), the periods are grouped by k-means without prior
 physical information or user interaction, and only the dominant (largest) cluster is used for
 the BLA and the models. The number of clusters comes from the data (silhouette, Rousseeuw 1987),
-including the answer "one cluster" when the periods are homogeneous.
+including the answer "one cluster" when the periods are homogeneous or differ only by
+independent cycle-to-cycle events. The features are each period's lift curve C_l(α)
+(`period_features`).
 """
 
 from dataclasses import dataclass
@@ -46,25 +48,54 @@ class ClusterResult:
     realization_index: np.ndarray
 
 
-def period_features(data: PeriodicData) -> np.ndarray:
-    """Feature vector of every period: its output waveform minus its realization's median period.
+FEATURE_BINS = 20  # equal-count angle-of-attack bins of the lift-curve features
 
-    A period's output waveform y[:, p, m] is the natural feature (the paper clusters periods in
-    the time domain, §3.4), but another phase realization has another waveform, so raw
-    waveforms would split the realizations rather than the flow regimes. Subtracting, per
-    realization, the sample-wise median over its periods removes the realization: periods of the
-    realization's majority regime sit near zero in every realization, periods of another regime
-    stand out by their difference. (A realization wholly in another regime is not detected this
-    way; the BLA's var_nl then shows it as a large spread between realizations.)
 
-    The features are divided by one common scale, not z-scored per sample: z-scoring would lift
-    the noise-only samples to the same weight as the samples where the regimes differ.
+def period_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarray:
+    """Feature vector of every period: its lift curve C_l(α) minus its realization's median one.
+
+    A period's lift curve is the mean output in each of `bins` equal-count bins of the input
+    (bin edges: quantiles of the input over all periods and realizations). The periods of a
+    level all sweep the same angles, so a flow regime shows up in the same bins in every
+    realization: a regime with less stall (the simulated wing's light-stall regime) lifts the
+    high-α bins, whichever phase realization is running. Each bin averages N/bins samples, so
+    the independent cycle-to-cycle events of one regime (a stall that comes a little earlier or
+    later) average out while a regime that lasts a large part of the period does not.
+
+    The features were the period's output waveform minus its realization's median period
+    before (the paper's §3.4 clusters in the time domain). Measured on the simulated wing with
+    persistent stall regimes (docs/plant.md §2), those waveform deviations split the periods by
+    realization rather than by regime, since the same regime deviates differently under another
+    phase realization; the stall events that differ at random from period to period spread over
+    all N samples and kept the silhouette of real regimes at 0.33-0.45, below the 0.5 of
+    structure, while the lift-curve features give 0.62-0.74 for the same periods and stay below
+    0.5 where no regime is present.
+
+    The realization's median lift curve is subtracted because the lift curve of a multisine
+    also depends on its phase realization (dynamics, hysteresis); periods of the realization's
+    majority regime then sit near zero in every realization. The features are divided by one
+    common scale, not z-scored per bin, so bins where nothing differs keep a small weight.
 
     Returns:
-        (P·M, N) array, rows ordered as (p, m) in C order (row p·M + m).
+        (P·M, bins) array, rows ordered as (p, m) in C order (row p·M + m).
     """
-    deviation = data.y - np.median(data.y, axis=1, keepdims=True)
-    X = deviation.transpose(1, 2, 0).reshape(data.P * data.M, data.N)
+    if bins < 2:
+        raise ValueError(f"bins must be >= 2; got {bins}")
+    edges = np.quantile(data.u, np.linspace(0.0, 1.0, bins + 1)[1:-1])
+    index = np.searchsorted(edges, data.u, side="right")  # (N, P, M) bin of every sample
+    curves = np.zeros((data.P, data.M, bins))
+    for p in range(data.P):
+        for m in range(data.M):
+            counts = np.bincount(index[:, p, m], minlength=bins)
+            sums = np.bincount(index[:, p, m], weights=data.y[:, p, m], minlength=bins)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                curves[p, m] = sums / counts  # NaN in a bin this period never visits
+    # A bin a period never visits takes its realization's mean there (or zero deviation).
+    fill = np.nanmean(np.where(np.isfinite(curves), curves, np.nan), axis=0, keepdims=True)
+    curves = np.where(np.isfinite(curves), curves, np.broadcast_to(fill, curves.shape))
+    curves = np.nan_to_num(curves)
+    deviation = curves - np.median(curves, axis=0, keepdims=True)
+    X = deviation.reshape(data.P * data.M, bins)
     scale = np.sqrt(np.mean(X**2))
     return X / scale if scale > 0 else X
 
@@ -108,26 +139,9 @@ def period_clusters(
         raise ValueError(f"n_components must be >= 1 or None; got {n_components}")
     X = period_features(data)
     n = X.shape[0]
-    # Exact rotation onto the (at most n − 1) principal directions: same distances, far fewer
-    # columns for k-means than the N samples of a waveform.
-    _, s, Vt = np.linalg.svd(X, full_matrices=False)
-    rank = int(np.sum(s > s[0] * 1e-12)) if s.size and s[0] > 0 else 0
-    if n_components is not None:
-        rank = min(rank, n_components)
-    Z = X @ Vt[:rank].T if rank else np.zeros((n, 1))
-    silhouettes: dict[int, float] = {}
-    best_labels = np.zeros(n, dtype=np.int64)
-    best_k, best_s = 1, -np.inf
-    if rank > 0:
-        for k in range(2, min(kmax, n - 1) + 1):
-            km = KMeans(n_clusters=k, n_init=n_init, random_state=random_state).fit(Z)
-            if np.unique(km.labels_).size < k:
-                continue  # fewer distinct points than clusters
-            sil = float(silhouette_score(Z, km.labels_))
-            silhouettes[k] = sil
-            if sil > best_s:
-                best_k, best_s, best_labels = k, sil, km.labels_
-    if best_s < min_silhouette:
+    Z = _principal_coordinates(X, n_components)
+    silhouettes, best_k, best_labels = _best_kmeans(Z, kmax, n_init, random_state)
+    if silhouettes.get(best_k, -np.inf) < min_silhouette:
         best_k, best_labels = 1, np.zeros(n, dtype=np.int64)
     labels = _relabel_by_size(Z, best_labels, best_k)
     sizes = np.bincount(labels, minlength=best_k)
@@ -142,6 +156,37 @@ def period_clusters(
         period_index=data.period_index.copy(),
         realization_index=data.realization_index.copy(),
     )
+
+
+def _principal_coordinates(X: np.ndarray, n_components: int | None) -> np.ndarray:
+    """Exact rotation onto the (at most n − 1) principal directions: the same distances, far
+    fewer columns for k-means than the N samples of a waveform."""
+    _, s, Vt = np.linalg.svd(X, full_matrices=False)
+    rank = int(np.sum(s > s[0] * 1e-12)) if s.size and s[0] > 0 else 0
+    if n_components is not None:
+        rank = min(rank, n_components)
+    return X @ Vt[:rank].T if rank else np.zeros((X.shape[0], 1))
+
+
+def _best_kmeans(
+    Z: np.ndarray, kmax: int, n_init: int, random_state: int
+) -> tuple[dict[int, float], int, np.ndarray]:
+    """k-means for k = 2 … min(kmax, n − 1): (silhouette per k, best k, its labels); best k is
+    1 with all-zero labels when no k could be tried."""
+    n = Z.shape[0]
+    silhouettes: dict[int, float] = {}
+    best_k, best_s, best_labels = 1, -np.inf, np.zeros(n, dtype=np.int64)
+    if not np.any(Z):
+        return silhouettes, best_k, best_labels
+    for k in range(2, min(kmax, n - 1) + 1):
+        km = KMeans(n_clusters=k, n_init=n_init, random_state=random_state).fit(Z)
+        if np.unique(km.labels_).size < k:
+            continue  # fewer distinct points than clusters
+        sil = float(silhouette_score(Z, km.labels_))
+        silhouettes[k] = sil
+        if sil > best_s:
+            best_k, best_s, best_labels = k, sil, km.labels_
+    return silhouettes, best_k, best_labels
 
 
 def _relabel_by_size(Z: np.ndarray, labels: np.ndarray, k: int) -> np.ndarray:

@@ -44,17 +44,19 @@ C_A1, C_A2, C_E1, C_E2, C_EP, C_EFD, C_EFU, C_DOWNWASH = 5, 6, 7, 8, 9, 10, 11, 
 C_ALIN, C_AFULL, C_PEXP, C_FFULL, C_FREATT = 13, 14, 15, 16, 17
 C_ASTALL, C_AREATT, C_SPREAD, C_RATE, C_EETA, C_SETA = 18, 19, 20, 21, 22, 23
 C_EV, C_GV, C_EV2, C_TVL, C_KMU, C_KSIG, C_XV0, C_XV1 = 24, 25, 26, 27, 28, 29, 30, 31
-N_COEF = 32
+C_RATE_TO_LIGHT, C_RATE_TO_DEEP, C_LIGHT_FRACTION = 32, 33, 34
+N_COEF = 35
 
 # State vector.
 S_X1, S_X2, S_X3, S_X4, S_ETA, S_VORTEX, S_TAU_V, S_KAPPA = 0, 1, 2, 3, 4, 5, 6, 7
-S_CV_PREV, S_STALLED, S_ALPHA_PREV, S_STARTED = 8, 9, 10, 11
-N_STATE = 12
+S_CV_PREV, S_STALLED, S_ALPHA_PREV, S_STARTED, S_LIGHT = 8, 9, 10, 11, 12
+N_STATE = 13
 
 # Output columns per sample.
 O_ALPHA, O_ALPHA_DOT, O_ALPHA_E, O_ALPHA_F, O_F = 0, 1, 2, 3, 4
 O_CL_CIRC, O_CL_VORTEX, O_CL_NC, O_CL, O_X_V, O_TAU_V, O_STALLED = 5, 6, 7, 8, 9, 10, 11
-N_OUT = 12
+O_LIGHT = 12
+N_OUT = 13
 
 _NO_VORTEX = 1.0e9  # vortex time meaning "no vortex on the wing"
 
@@ -92,6 +94,13 @@ def aero_coefficients(params: WingParams) -> np.ndarray:
     c[C_KMU] = math.log(params.vortex_strength_mean) - 0.5 * sig2
     c[C_KSIG] = math.sqrt(sig2)
     c[C_XV0], c[C_XV1] = params.vortex_start_c, params.vortex_end_c
+    # Stall-type regime: a two-state Markov process with mean dwell light_stall_dwell_s in the
+    # light (trailing-edge) regime, a stationary fraction light_stall_fraction of the time in it.
+    frac = params.light_stall_fraction
+    c[C_LIGHT_FRACTION] = frac
+    if frac > 0.0:
+        c[C_RATE_TO_DEEP] = 1.0 / params.light_stall_dwell_s
+        c[C_RATE_TO_LIGHT] = c[C_RATE_TO_DEEP] * frac / (1.0 - frac)
     return c
 
 
@@ -128,13 +137,17 @@ def _std_normal_cdf(x: float) -> float:
 
 
 @njit(cache=True)
-def _initialise(alpha: float, state: np.ndarray, c: np.ndarray) -> None:
+def _initialise(alpha: float, state: np.ndarray, rng: np.ndarray, c: np.ndarray) -> None:
     """Steady flow at α: lags at equilibrium, attached unless |α| is past the stall mid-point."""
     a_abs = abs(alpha)
     state[S_X1] = c[C_A1] * alpha
     state[S_X2] = c[C_A2] * alpha
     state[S_X3] = c[C_CLA] * alpha
-    stalled = a_abs >= c[C_ASTALL]
+    # Regime from its stationary distribution; no draw when the regime process is off, so the
+    # random stream (and every result) is that of the plant without regimes.
+    light = c[C_LIGHT_FRACTION] > 0.0 and uniform(rng) < c[C_LIGHT_FRACTION]
+    state[S_LIGHT] = 1.0 if light else 0.0
+    stalled = not light and a_abs >= c[C_ASTALL]
     state[S_STALLED] = 1.0 if stalled else 0.0
     f = f_separated_branch(a_abs, c) if stalled else f_attached_branch(a_abs, c)
     state[S_X4] = f
@@ -164,7 +177,7 @@ def advance_aero(
         a_now = alpha[k]
         n_sub = m
         if state[S_STARTED] == 0.0:  # first sample: steady flow, nothing to integrate
-            _initialise(a_now, state, c)
+            _initialise(a_now, state, rng, c)
             n_sub = 0
         a_prev = state[S_ALPHA_PREV]
         alpha_dot = (a_now - a_prev) * c[C_FS]
@@ -184,6 +197,12 @@ def advance_aero(
             target_p = cla * alpha_e_mid + cl_nc
             state[S_X3] = state[S_X3] * c[C_EP] + (1.0 - c[C_EP]) * target_p
             alpha_f_abs = abs(state[S_X3] / cla)
+            # Stall-type regime switch (two-state Markov process, docs/plant.md §2)
+            if c[C_LIGHT_FRACTION] > 0.0:
+                rate = c[C_RATE_TO_DEEP] if state[S_LIGHT] != 0.0 else c[C_RATE_TO_LIGHT]
+                if uniform(rng) < -math.expm1(-rate * h):
+                    state[S_LIGHT] = 1.0 - state[S_LIGHT]
+            light = state[S_LIGHT] != 0.0
             stalled = state[S_STALLED] != 0.0
             if stalled:
                 f_target = f_separated_branch(alpha_f_abs, c)
@@ -199,6 +218,8 @@ def advance_aero(
             # Bistable regime switch with α-dependent hazard
             if stalled:
                 hazard = c[C_RATE] * _std_normal_cdf((c[C_AREATT] - alpha_f_abs) / c[C_SPREAD])
+            elif light:
+                hazard = 0.0  # trailing-edge stall: no leading-edge stall event
             else:
                 hazard = c[C_RATE] * _std_normal_cdf((alpha_f_abs - c[C_ASTALL]) / c[C_SPREAD])
             if uniform(rng) < -math.expm1(-hazard * h):
@@ -237,6 +258,7 @@ def advance_aero(
         out[k, O_X_V] = c[C_XV0] + (c[C_XV1] - c[C_XV0]) * travel
         out[k, O_TAU_V] = min(state[S_TAU_V], _NO_VORTEX) / c[C_TU]
         out[k, O_STALLED] = state[S_STALLED]
+        out[k, O_LIGHT] = state[S_LIGHT]
         state[S_ALPHA_PREV] = a_now
 
 
@@ -267,7 +289,8 @@ class AeroSeries:
 
     alpha, alpha_dot [rad, rad/s]; alpha_effective (α_E) and alpha_lagged (α_F) [rad];
     separation_point f_dyn (x/c); cl_circulatory, cl_vortex, cl_added_mass and their sum cl;
-    vortex_position (x/c of the suction bump), vortex_time_tu (τ_v / T_u); stalled (bool).
+    vortex_position (x/c of the suction bump), vortex_time_tu (τ_v / T_u); stalled (bool);
+    light_stall (bool): the stall-type regime is the light (trailing-edge) one.
     """
 
     alpha: np.ndarray
@@ -282,6 +305,7 @@ class AeroSeries:
     vortex_position: np.ndarray
     vortex_time_tu: np.ndarray
     stalled: np.ndarray
+    light_stall: np.ndarray
 
     @classmethod
     def from_output(cls, out: np.ndarray) -> "AeroSeries":
@@ -298,6 +322,7 @@ class AeroSeries:
             vortex_position=out[:, O_X_V].copy(),
             vortex_time_tu=out[:, O_TAU_V].copy(),
             stalled=out[:, O_STALLED] != 0.0,
+            light_stall=out[:, O_LIGHT] != 0.0,
         )
 
 

@@ -37,7 +37,8 @@ class WingTruth:
         the fine grid (pressure drag; moment about c/4, nose-up positive).
     separation_point: f (x/c); stalled: flow regime; vortex_lift: C_l of the vortex;
     vortex_position: x/c of its suction bump; vortex_time_tu: τ_v / T_u since the last stall;
-    alpha_effective: α_E [rad]; alpha: the input α [rad].
+    alpha_effective: α_E [rad]; alpha: the input α [rad]; light_stall: the stall-type regime is
+    the light (trailing-edge) one (docs/plant.md §2).
     """
 
     cl: float
@@ -53,6 +54,7 @@ class WingTruth:
     vortex_time_tu: float
     alpha_effective: float
     alpha: float
+    light_stall: bool
 
 
 @dataclass(frozen=True)
@@ -72,6 +74,7 @@ class WingTruthSeries:
     vortex_time_tu: np.ndarray
     alpha_effective: np.ndarray
     alpha: np.ndarray
+    light_stall: np.ndarray
 
     @classmethod
     def from_kernels(cls, aero_out: np.ndarray, truth: np.ndarray) -> "WingTruthSeries":
@@ -89,6 +92,7 @@ class WingTruthSeries:
             vortex_time_tu=aero_out[:, aero.O_TAU_V].copy(),
             alpha_effective=aero_out[:, aero.O_ALPHA_E].copy(),
             alpha=aero_out[:, aero.O_ALPHA].copy(),
+            light_stall=aero_out[:, aero.O_LIGHT] != 0.0,
         )
 
     def at(self, k: int) -> WingTruth:
@@ -107,6 +111,7 @@ class WingTruthSeries:
             vortex_time_tu=float(self.vortex_time_tu[k]),
             alpha_effective=float(self.alpha_effective[k]),
             alpha=float(self.alpha[k]),
+            light_stall=bool(self.light_stall[k]),
         )
 
 

@@ -91,6 +91,9 @@ class WingParams(RigGeometry):
     vortex_strength_mean: float = 1.7
     vortex_strength_cv: float = 0.3
 
+    light_stall_fraction: float = 0.2
+    light_stall_dwell_s: float = 80.0
+
     separation_blend_width_c: float = 0.05
     base_pressure_min: float = -0.7
     vortex_half_width_c: float = 0.2
@@ -114,6 +117,7 @@ class WingParams(RigGeometry):
             "separation_lag_down_tu separation_lag_up_tu alpha_linear_deg separation_exponent "
             "f_full_separation switch_spread_deg switch_time_s separation_noise_time_s "
             "vortex_lag_tu vortex_travel_tu vortex_strength_mean separation_blend_width_c "
+            "light_stall_dwell_s "
             "vortex_half_width_c tube_lag_min_s drift_time_s"
         ).split()
         for name in positive:
@@ -149,6 +153,11 @@ class WingParams(RigGeometry):
             )
         if not (0.0 < self.f_full_separation < self.f_reattach < 1.0):
             raise ValueError("WingParams: need 0 < f_full_separation < f_reattach < 1")
+        if not (0.0 <= self.light_stall_fraction < 0.5):
+            raise ValueError(
+                "WingParams.light_stall_fraction must lie in [0, 0.5): the light-stall regime is "
+                "the minority one (0: no regimes)"
+            )
         if not (0.0 <= self.vortex_start_c < self.vortex_end_c <= 1.0):
             raise ValueError("WingParams: need 0 <= vortex_start_c < vortex_end_c <= 1")
         if self.vortex_start_c - self.vortex_half_width_c < 0.0:
