@@ -15,6 +15,7 @@ from multisine_gen.plan import ExperimentPlan
 from pitch_actuator.dynamics import ActuatorModel
 from pressure_scanner.integration import PressureIntegrator
 from wing_sim.plant import WingPlant
+from wing_sim.wing_params import WingParams
 
 T0_NS = 1_700_000_000_000_000_000  # the plan's t0 for simulated runs
 
@@ -27,7 +28,10 @@ class SimulatedRun:
     cl: np.ndarray  # C_l by pressure integration (the output)
 
 
-def simulate_plan(plan: ExperimentPlan, seed: int = 0) -> SimulatedRun:
+def simulate_plan(
+    plan: ExperimentPlan, seed: int = 0, params: WingParams | None = None
+) -> SimulatedRun:
+    """The plan through actuator, wing (params: default wing if None) and lift integration."""
     command = np.radians(plan.command_deg())
     actuator = ActuatorModel(fs=plan.fs, seed=seed)
     pitch = np.empty(len(command))
@@ -35,7 +39,7 @@ def simulate_plan(plan: ExperimentPlan, seed: int = 0) -> SimulatedRun:
     for k, c in enumerate(command):
         sample = actuator.step(c)
         pitch[k], alpha[k] = sample.position_rad, sample.alpha_true_rad
-    plant = WingPlant(seed=seed)
+    plant = WingPlant(params, seed=seed)
     pressures, _ = plant.simulate(alpha)
     integrator = PressureIntegrator(plant.taps)
     cl = integrator.integrate(pressures, pitch, plant.dynamic_pressure_pa).cl

@@ -72,8 +72,8 @@ def test_effective_angle_follows_the_wagner_response_from_scipy() -> None:
 
 def test_stall_waiting_time_matches_the_hazard_rate() -> None:
     """At constant α between the thresholds, attached flow stalls after an exponential waiting
-    time with rate Φ((α − α_stall)/Δ)/τ."""
-    p = WingParams()
+    time with rate Φ((α − α_stall)/Δ)/τ (the deep-stall switch alone: no light regime)."""
+    p = WingParams(light_stall_fraction=0.0)
     alpha_deg = 21.5
     rate = 0.5 * math.erfc(-((alpha_deg - p.alpha_stall_deg) / p.switch_spread_deg) / math.sqrt(2))
     rate /= p.switch_time_s
@@ -90,7 +90,7 @@ def test_stall_waiting_time_matches_the_hazard_rate() -> None:
 
 
 def test_vortex_lift_appears_at_a_stall_event_and_decays() -> None:
-    p = WingParams(separation_noise_std=0.0)
+    p = WingParams(separation_noise_std=0.0, light_stall_fraction=0.0)
     alpha = np.full(1200, math.radians(23.0))
     alpha[:100] = math.radians(20.0)  # start attached, then jump past the stall angle
     series = UnsteadyAerodynamics(p, seed=2).simulate(alpha)

@@ -12,6 +12,7 @@ import pytest
 
 from pressure_scanner.integration import PressureIntegrator
 from wing_sim.plant import WingPlant
+from wing_sim.wing_params import WingParams
 
 FS = 200.0
 N = 10_000  # one period: 50 s, lines every 0.02 Hz
@@ -29,8 +30,8 @@ def _odd_random_phase_multisine(seed: int) -> tuple[np.ndarray, np.ndarray]:
     return u * (2.4 / u.std()), excited
 
 
-def _lift(alpha_rad: np.ndarray, seed: int = 0) -> np.ndarray:
-    plant = WingPlant(seed=seed)
+def _lift(alpha_rad: np.ndarray, seed: int = 0, params: WingParams | None = None) -> np.ndarray:
+    plant = WingPlant(params, seed=seed)
     pressure, _ = plant.simulate(alpha_rad)
     coeffs = PressureIntegrator().integrate(pressure, alpha_rad, plant.dynamic_pressure_pa)
     assert coeffs.valid.all()
@@ -82,7 +83,10 @@ def _peak_lift_per_cycle(offset_deg: float, freq_hz: float, cycles: int) -> np.n
     n_cycle = round(FS / freq_hz)
     t = np.arange(n_cycle * (cycles + 2)) / FS
     alpha = np.deg2rad(offset_deg + 4.7 * np.sin(2 * math.pi * freq_hz * t))
-    cl = _lift(alpha, seed=1).reshape(cycles + 2, n_cycle)[2:]
+    # The deep-stall regime's cycle-to-cycle spread (the light-stall regime is tested in
+    # test_stall_regimes.py).
+    deep_only = WingParams(light_stall_fraction=0.0)
+    cl = _lift(alpha, seed=1, params=deep_only).reshape(cycles + 2, n_cycle)[2:]
     return cl.max(axis=1)
 
 

@@ -82,7 +82,9 @@ def test_tap_integral_bias_is_below_one_percent_in_attached_flow(alpha_deg: floa
 
 def test_tap_integral_bias_stays_a_few_percent_when_stalled() -> None:
     alpha = np.full(400, math.radians(26.0))
-    _, truth, cp = WingPlant(seed=0).simulate(alpha, clean_cp=True)
+    _, truth, cp = WingPlant(WingParams(light_stall_fraction=0.0), seed=0).simulate(
+        alpha, clean_cp=True
+    )
     assert truth.stalled[-1]
     taps = PressureIntegrator().integrate_cp(cp, alpha)
     bias = np.mean(taps.cl[100:] / truth.cl_fine[100:] - 1.0)

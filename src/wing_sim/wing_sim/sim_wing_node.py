@@ -23,7 +23,7 @@ from rig_runtime.interface import (
 )
 
 from .plant import WingPlant
-from .wing_params import WingParams
+from .wing_params import PRESETS, wing_params_preset
 
 PARAMETERS = [
     Parameter("seed", 0, "seed of stall switching, vortex strength, drift and noise", min=0),
@@ -31,7 +31,28 @@ PARAMETERS = [
     Parameter(
         "taps_qos", "stream", "QoS of /pressure/taps", choices=("stream", "sensor", "default")
     ),
+    Parameter(
+        "preset", "stall_regimes", "named wing parameter set", choices=tuple(sorted(PRESETS))
+    ),
+    Parameter(
+        "light_stall_fraction",
+        -1.0,
+        "fraction of the time in the light-stall regime, 0 <= x < 0.5; < 0: the preset's",
+    ),
+    Parameter(
+        "light_stall_dwell_s", -1.0, "mean light-stall episode [s], > 0; <= 0: the preset's"
+    ),
 ]
+
+
+def wing_params(p: dict[str, Any]) -> Any:
+    """The WingParams of the node's parameters: the preset, then the set overrides."""
+    overrides: dict[str, float] = {}
+    if p["light_stall_fraction"] >= 0:
+        overrides["light_stall_fraction"] = float(p["light_stall_fraction"])
+    if p["light_stall_dwell_s"] > 0:
+        overrides["light_stall_dwell_s"] = float(p["light_stall_dwell_s"])
+    return wing_params_preset(p["preset"], **overrides)
 
 
 class SimWing:
@@ -39,7 +60,7 @@ class SimWing:
         p = node.params
         self.node = node
         taps = load_taps(p["taps_file"] or None)
-        self.plant = WingPlant(WingParams(), taps, seed=p["seed"])
+        self.plant = WingPlant(wing_params(p), taps, seed=p["seed"])
         self.fields = point_fields(node.new_message)
         self.pub = node.create_publisher(PRESSURE_TAPS.type, PRESSURE_TAPS.name, p["taps_qos"])
         node.create_subscription(
@@ -47,7 +68,11 @@ class SimWing:
         )
         self.refused = 0
         node.logger.info(
-            "simulated wing: %d taps, q = %.1f Pa", taps.n_taps, self.plant.dynamic_pressure_pa
+            "simulated wing (%s): %d taps, q = %.1f Pa, light-stall fraction %.2f",
+            p["preset"],
+            taps.n_taps,
+            self.plant.dynamic_pressure_pa,
+            self.plant.params.light_stall_fraction,
         )
 
     def on_state(self, msg: Any) -> None:

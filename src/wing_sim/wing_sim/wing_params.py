@@ -5,8 +5,10 @@ the name ends in `_tu`, meaning units of the convective time T_u = c/(2U) (≈ 1
 in Hansen, Gaunaa & Madsen, Risø-R-1354 (2004).
 """
 
+import dataclasses
 import math
 from dataclasses import dataclass, fields
+from typing import Any
 
 from pressure_scanner.rig_geometry import RigGeometry
 
@@ -43,6 +45,14 @@ class WingParams(RigGeometry):
         repeatable enough (0.015 s: the 1.6 Hz sine floor drops from 0.30 to 0.18).
         separation_noise_std, separation_noise_time_s: Ornstein–Uhlenbeck noise on √f in
         separated flow (σ = 0.03 → C_l std ≈ 0.045 fully separated at 25°).
+    Stall-type regimes (docs/plant.md §2; a two-state Markov process in time)
+        light_stall_fraction: long-run fraction of the time in the light (trailing-edge) stall
+        regime, 0.2; 0 switches the regimes off (preset "repeatable_stall"). In it the
+        leading-edge stall event does not happen: the separation point follows the attached
+        branch's trailing-edge separation both ways, without hysteresis or vortex. The rest of
+        the time the wing is in the deep (leading-edge) stall regime described above.
+        light_stall_dwell_s: mean duration of a light-stall episode, 80 s (exponential); the
+        deep regime's mean duration follows as dwell·(1 − fraction)/fraction = 320 s.
     Leading-edge vortex (Beddoes–Leishman vortex lift, Leishman & Beddoes, JAHS 34(3), 1989)
         vortex_lag_tu: T_V0 = 6; vortex_travel_tu: T_VL = 11 (vortex at the trailing edge);
         vortex_strength_mean, vortex_strength_cv: per-stall-event log-normal strength factor.
@@ -189,3 +199,23 @@ class WingParams(RigGeometry):
     def reynolds_number(self) -> float:
         """Chord Reynolds number with ν = 1.5e-5 m²/s (air near 20 °C)."""
         return self.velocity_m_s * self.chord_m / 1.5e-5
+
+
+# Named parameter sets (docs/plant.md §2, "Presets"). "stall_regimes" is the default wing;
+# "repeatable_stall" is the wing of release 0.1 and the first wave, before the stall-type regimes:
+# every period at the high offset follows one regime, the bistable switch alone varies from
+# cycle to cycle. It gives bit for bit the results of that plant for a seed.
+PRESETS: dict[str, dict[str, Any]] = {
+    "stall_regimes": {},
+    "repeatable_stall": {"light_stall_fraction": 0.0},
+}
+
+
+def wing_params_preset(name: str = "stall_regimes", **overrides: Any) -> WingParams:
+    """WingParams of a named preset (PRESETS), with field overrides on top."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown wing preset {name!r}; choose one of {sorted(PRESETS)}")
+    unknown = set(overrides) - {f.name for f in fields(WingParams)}
+    if unknown:
+        raise ValueError(f"WingParams has no field(s) {sorted(unknown)}")
+    return dataclasses.replace(WingParams(), **{**PRESETS[name], **overrides})
