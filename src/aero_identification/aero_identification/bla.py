@@ -257,3 +257,39 @@ def estimate_bla(
         noise_level=np.sqrt(var_Y_band_mean),
         method=method,
     )
+
+
+def bla_levels_db(bla: BLA, freq_hz: float = 1.02, half_band_hz: float = 0.1) -> dict[str, float]:
+    """The paper's §3.3 figures of a BLA, in dB: SNR and SNLR near `freq_hz`, distortion levels.
+
+    snr_db = 10 log10(mean |G|² / mean var_noise) and snlr_db = 10 log10(mean |G|² / mean
+    var_nl) over the excited lines within `half_band_hz` of `freq_hz` (the FRF against its noise
+    and nonlinearity curves, paper Fig. 7; variances of the mean estimate G, as in BLA).
+    odd_db, even_db, noise_db: RMS level of the odd and even detection lines and of the noise
+    (over the band), relative to the RMS excited-line output level (paper Fig. 6). Values are
+    NaN where a quantity is absent (no line in the band, var_nl = 0: +inf).
+    """
+    near = np.abs(bla.freq - freq_hz) <= half_band_hz
+    if not near.any():
+        raise ValueError(f"no excited line within {half_band_hz} Hz of {freq_hz} Hz")
+    g2 = float(np.mean(np.abs(bla.G[near]) ** 2))
+
+    def ratio_db(num: float, den: float) -> float:
+        if den <= 0.0:
+            return float("inf")
+        return float(10.0 * np.log10(num / den))
+
+    def level_db(level: np.ndarray) -> float:
+        if level.size == 0:
+            return float("nan")
+        return float(20.0 * np.log10(np.sqrt(np.mean(level**2)) / reference))
+
+    reference = float(np.sqrt(np.mean(bla.excited_level**2)))
+    return {
+        "freq_hz": float(np.mean(bla.freq[near])),
+        "snr_db": ratio_db(g2, float(np.mean(bla.var_noise[near]))),
+        "snlr_db": ratio_db(g2, float(np.mean(bla.var_nl[near]))),
+        "odd_db": level_db(bla.odd_nl_level),
+        "even_db": level_db(bla.even_nl_level),
+        "noise_db": level_db(bla.noise_level),
+    }

@@ -15,6 +15,11 @@ class IdentificationConfig:
     estimation_realization: int = 0
     validation_realization: int = 1
     min_periods: int = 2
+    # Period clustering (clustering.py): the BLA and the models use each level's dominant
+    # cluster only. clustering_ablation: the final identification also runs the whole pipeline
+    # without clustering (every valid period), for table1_no_clustering and clustering.md.
+    clustering: bool = True
+    clustering_ablation: bool = True
     # How the levels weigh in the all-levels PNLSS cost and in the choice of its iterate:
     # "none": absolute errors (the largest level dominates); "relative": each level's record
     # by 1 / var(its output), the sum of the levels' squared relative errors that Table 1

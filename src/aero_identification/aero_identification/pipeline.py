@@ -18,6 +18,7 @@ Models are simulated in periodic steady state (the record's last period is prepe
 dropped), like the measured data.
 """
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass, field
@@ -26,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .bla import BLA, estimate_bla
+from .bla import BLA, bla_levels_db, estimate_bla
 from .campaign import CampaignAssembler, PeriodBlock, SineRecord
 from .clustering import ClusterResult, period_clusters
 from .config import IdentificationConfig
@@ -71,6 +72,10 @@ class IdentificationResult:
     excluded_sines: list[str] = field(default_factory=list)
     data_quality: dict[str, Any] = field(default_factory=dict)  # see data_quality()
     scan: ScanResult | None = None  # the structure scan of the all-levels PNLSS (config.scan)
+    # The same pipeline without clustering (config.clustering_ablation, final only) and what
+    # clustering changed (clustering_effect()).
+    no_clustering: "IdentificationResult | None" = None
+    clustering_effect: dict[str, Any] = field(default_factory=dict)
 
     @property
     def clean(self) -> bool:
@@ -92,6 +97,8 @@ class IdentificationResult:
             "all_levels": table1(self.errors_all, levels, freqs),
             "level1": table1(self.errors_level1, levels, freqs),
         }
+        if self.no_clustering is not None:
+            tables["no_clustering"] = table1(self.no_clustering.errors_all, levels, freqs)
         if self.clean:
             return tables
         # Never a clean-looking Table 1 from data that lost or excluded samples.
@@ -120,6 +127,7 @@ class IdentificationResult:
                     "k": int(lv.clusters.k),
                     "dominant": int(lv.clusters.dominant),
                     "sizes": [int(s) for s in lv.clusters.sizes],
+                    "silhouette": {str(k): v for k, v in lv.clusters.silhouette.items()},
                 }
             if lv.linear is not None:
                 entry["bla_ss"] = lv.linear.to_dict()
@@ -143,7 +151,14 @@ class IdentificationResult:
                 "all_levels": [[m, lv, f, e] for (m, lv, f), e in self.errors_all.items()],
                 "level1": [[m, lv, f, e] for (m, lv, f), e in self.errors_level1.items()],
             },
-            "table1": {"markdown": tables["all_levels"][0], "markdown_level1": tables["level1"][0]},
+            "table1": {
+                "markdown": tables["all_levels"][0],
+                "markdown_level1": tables["level1"][0],
+                "markdown_no_clustering": tables["no_clustering"][0]
+                if "no_clustering" in tables
+                else None,
+            },
+            "clustering_effect": self.clustering_effect,
             "predictions": [_trim_prediction(p) for p in self.predictions],
             "warnings": self.warnings,
             "data_quality": self.data_quality,
@@ -240,11 +255,17 @@ def identify(
         result.linear_level1 = models_from.linear_level1
         result.pnlss_all = models_from.pnlss_all
         result.scan = models_from.scan
+        result.no_clustering = models_from.no_clustering
         result.pnlss_level1 = models_from.pnlss_level1
         result.level1_signature = models_from.level1_signature
         result.warnings = [w for w in models_from.warnings if not w.startswith("sine ")]
         result.timings_s = {"bla": 0.0, "pnlss": 0.0}
         _validate_on_sines(assembler, result, names)
+        if result.no_clustering is not None:
+            result.no_clustering = identify(
+                assembler, result.no_clustering.config, final, models_from=result.no_clustering
+            )
+            result.clustering_effect = clustering_effect(assembler, result, result.no_clustering)
         result.data_quality = data_quality(assembler, result)
         result.timings_s["total"] = time.perf_counter() - t_start
         return result
@@ -272,8 +293,11 @@ def identify(
             min(counts),
         )
         try:
-            res.clusters = period_clusters(data)
-            kept = data.select(res.clusters.keep, min_periods=config.min_periods)
+            if config.clustering:
+                res.clusters = period_clusters(data)
+                kept = data.select(res.clusters.keep, min_periods=config.min_periods)
+            else:
+                kept = data
             if kept.M < 2:
                 result.warnings.append(
                     f"level {res.name}: the dominant cluster leaves < 2 realizations; "
@@ -329,9 +353,71 @@ def identify(
 
     # 3. Validation on the single sines.
     _validate_on_sines(assembler, result, names)
+
+    # 4. The ablation: the same pipeline on every valid period (final identification only).
+    if final and config.clustering and config.clustering_ablation:
+        t0 = time.perf_counter()
+        plain = dataclasses.replace(config, clustering=False, clustering_ablation=False)
+        result.no_clustering = identify(assembler, plain, final=True, client=client)
+        result.clustering_effect = clustering_effect(assembler, result, result.no_clustering)
+        result.timings_s["no_clustering"] = time.perf_counter() - t0
     result.data_quality = data_quality(assembler, result)
     result.timings_s["total"] = time.perf_counter() - t_start
     return result
+
+
+def clustering_effect(
+    assembler: CampaignAssembler,
+    clustered: IdentificationResult,
+    plain: IdentificationResult,
+) -> dict[str, Any]:
+    """What clustering changed, per level: clusters, periods used, the BLA's levels
+    (bla.bla_levels_db: SNR and SNLR near 1.02 Hz, distortion levels) and mean variances, and
+    the all-levels PNLSS error on the validation realization's dominant-cluster periods (one
+    steady-state mean period; both models scored on the same periods)."""
+    cfg = clustered.config
+    effect: dict[str, Any] = {}
+    for level, lv in clustered.levels.items():
+        other = plain.levels.get(level)
+        entry: dict[str, Any] = {
+            "k": None if lv.clusters is None else int(lv.clusters.k),
+            "sizes": None if lv.clusters is None else [int(s) for s in lv.clusters.sizes],
+            "periods_used": lv.periods_used,
+            "periods_used_without": None if other is None else other.periods_used,
+        }
+        for tag, bla in (("with", lv.bla), ("without", other.bla if other else None)):
+            if bla is None:
+                continue
+            try:
+                entry[f"bla_{tag}"] = bla_levels_db(bla)
+            except ValueError:
+                entry[f"bla_{tag}"] = {}
+            g2 = np.abs(bla.G) ** 2
+            entry[f"bla_{tag}"]["mean_var_nl_db"] = (
+                float(10 * np.log10(np.mean(bla.var_nl / g2)))
+                if np.any(bla.var_nl > 0)
+                else float("-inf")
+            )
+            entry[f"bla_{tag}"]["mean_var_noise_db"] = float(
+                10 * np.log10(np.mean(bla.var_noise / g2))
+            )
+        val = cfg.validation_realization
+        if (level, val) in assembler.blocks:
+            cols = _kept_columns(assembler, clustered, level, val)
+            block = assembler.blocks[(level, val)]
+            if len(cols):
+                u = block.u[:, cols].mean(axis=1)
+                y = block.y[:, cols].mean(axis=1)
+                for tag, model in (("with", clustered.pnlss_all), ("without", plain.pnlss_all)):
+                    if model is None:
+                        continue
+                    y_hat = steady_state_response(model, u, block.N)
+                    entry[f"pnlss_validation_{tag}"] = (
+                        relative_rms_error(y, y_hat) if np.all(np.isfinite(y_hat)) else None
+                    )
+                entry["validation_periods"] = len(cols)
+        effect[lv.name] = entry
+    return effect
 
 
 def warm_up() -> float:
@@ -372,6 +458,28 @@ def _kept_columns(
     cols = valid[-count:]
     keep = clusters.keep[:, column]
     return cols[keep] if keep.any() else cols
+
+
+def _clustered_outputs(
+    assembler: CampaignAssembler, result: IdentificationResult, level: int
+) -> np.ndarray | None:
+    """(N, P, M) outputs of the periods the level's clustering labelled (estimation and
+    validation realization), or None when they are not in the assembler any more."""
+    clusters = result.levels[level].clusters
+    if clusters is None:
+        return None
+    cfg = result.config
+    count = clusters.labels.shape[0]
+    ys = []
+    for m in (cfg.estimation_realization, cfg.validation_realization):
+        block = assembler.blocks.get((level, m))
+        if block is None:
+            return None
+        cols = _valid_periods(block)[-count:]
+        if len(cols) != count:
+            return None
+        ys.append(block.y[:, cols])
+    return np.stack(ys, axis=2)
 
 
 def _level_signature(
@@ -665,8 +773,16 @@ def write_report(
             )
         if lv.clusters is not None:
             written[f"clusters_{tag}"] = report.plot_clusters(
-                lv.clusters.labels, out / f"clusters_{tag}.png", title=f"Clusters, {lv.name} level"
+                lv.clusters.labels,
+                out / f"clusters_{tag}.png",
+                y=_clustered_outputs(assembler, result, lv.level),
+                fs=result.fs,
+                title=f"Clusters, {lv.name} level (k = {lv.clusters.k}; colour 0 kept)",
             )
+    if result.clustering_effect:
+        path = out / "clustering.md"
+        path.write_text(report.clustering_markdown(result.clustering_effect))
+        written["clustering"] = path
     for pred in result.predictions:
         tag = pred["name"].replace(" ", "_").replace(".", "p")
         alpha = np.asarray(pred["alpha_deg"])

@@ -26,6 +26,7 @@ class SimulatedRun:
     stamps_ns: np.ndarray  # t0 + k/fs
     pitch_deg: np.ndarray  # measured pitch (the identification input)
     cl: np.ndarray  # C_l by pressure integration (the output)
+    light_stall: np.ndarray  # plant truth: the light-stall regime, per sample (bool)
 
 
 def simulate_plan(
@@ -40,8 +41,10 @@ def simulate_plan(
         sample = actuator.step(c)
         pitch[k], alpha[k] = sample.position_rad, sample.alpha_true_rad
     plant = WingPlant(params, seed=seed)
-    pressures, _ = plant.simulate(alpha)
+    pressures, truth = plant.simulate(alpha)
     integrator = PressureIntegrator(plant.taps)
     cl = integrator.integrate(pressures, pitch, plant.dynamic_pressure_pa).cl
     stamps = T0_NS + np.round(np.arange(len(command)) * 1e9 / plan.fs).astype(np.int64)
-    return SimulatedRun(json.loads(plan.to_json()), stamps, np.degrees(pitch), cl)
+    return SimulatedRun(
+        json.loads(plan.to_json()), stamps, np.degrees(pitch), cl, truth.light_stall.copy()
+    )

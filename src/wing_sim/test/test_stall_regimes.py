@@ -53,8 +53,12 @@ def test_a_minority_of_high_offset_periods_runs_in_the_light_stall_regime() -> N
             # periods' mean lift above 21° differs by far more than the sensor noise
             # (C_l std 0.0012 per sample, docs/plant.md §5).
             high = alpha > 21.0
-            light_mean = np.mean([c[h].mean() for c, h in zip(cl[in_light], high[in_light])])
-            deep_mean = np.mean([c[h].mean() for c, h in zip(cl[~in_light], high[~in_light])])
+            light_mean = np.mean(
+                [c[h].mean() for c, h in zip(cl[in_light], high[in_light], strict=True)]
+            )
+            deep_mean = np.mean(
+                [c[h].mean() for c, h in zip(cl[~in_light], high[~in_light], strict=True)]
+            )
             assert light_mean - deep_mean > 0.1, (seed, light_mean, deep_mean)
     # The configured long-run fraction of the time, over the five seeds' 60 periods: the share
     # of periods whose majority is light lies within a factor two of it (0.1-0.4 for 0.2).
@@ -65,7 +69,7 @@ def test_a_minority_of_high_offset_periods_runs_in_the_light_stall_regime() -> N
 
 def test_at_the_low_offset_no_period_differs_beyond_the_noise() -> None:
     for seed in SEEDS:
-        cl, light, _ = _level_runs(0, seed)
+        cl, _, _ = _level_runs(0, seed)
         # Noise of one period's C_l: the scatter of the periods around their mean, which for
         # repeating periods is the sensor noise alone (×√(1 − 1/P) for the mean's share).
         residual = cl - cl.reshape(2, MEASURED, -1).mean(axis=1).repeat(MEASURED, axis=0)

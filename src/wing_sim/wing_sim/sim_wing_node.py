@@ -23,7 +23,7 @@ from rig_runtime.interface import (
 )
 
 from .plant import WingPlant
-from .wing_params import PRESETS, wing_params_preset
+from .wing_params import PRESETS, WingParams, wing_params_preset
 
 PARAMETERS = [
     Parameter("seed", 0, "seed of stall switching, vortex strength, drift and noise", min=0),
@@ -39,13 +39,11 @@ PARAMETERS = [
         -1.0,
         "fraction of the time in the light-stall regime, 0 <= x < 0.5; < 0: the preset's",
     ),
-    Parameter(
-        "light_stall_dwell_s", -1.0, "mean light-stall episode [s], > 0; <= 0: the preset's"
-    ),
+    Parameter("light_stall_dwell_s", -1.0, "mean light-stall episode [s], > 0; <= 0: the preset's"),
 ]
 
 
-def wing_params(p: dict[str, Any]) -> Any:
+def wing_params(p: Any) -> WingParams:
     """The WingParams of the node's parameters: the preset, then the set overrides."""
     overrides: dict[str, float] = {}
     if p["light_stall_fraction"] >= 0:
