@@ -392,14 +392,13 @@ def clustering_effect(
                 entry[f"bla_{tag}"] = bla_levels_db(bla)
             except ValueError:
                 entry[f"bla_{tag}"] = {}
+            # Variances of one realization's and one period's FRF (bla.BLA: × M and × M·P),
+            # relative to |G|², so that BLAs from different numbers of periods compare.
             g2 = np.abs(bla.G) ** 2
-            entry[f"bla_{tag}"]["mean_var_nl_db"] = (
-                float(10 * np.log10(np.mean(bla.var_nl / g2)))
-                if np.any(bla.var_nl > 0)
-                else float("-inf")
-            )
-            entry[f"bla_{tag}"]["mean_var_noise_db"] = float(
-                10 * np.log10(np.mean(bla.var_noise / g2))
+            nl = float(np.mean(bla.var_nl * bla.M / g2))
+            entry[f"bla_{tag}"]["var_nl_db"] = float(10 * np.log10(nl)) if nl > 0 else None
+            entry[f"bla_{tag}"]["var_noise_db"] = float(
+                10 * np.log10(np.mean(bla.var_noise * bla.M * bla.P / g2))
             )
         val = cfg.validation_realization
         if (level, val) in assembler.blocks:

@@ -39,10 +39,10 @@ class WingParams(RigGeometry):
         switch_spread_deg: 0.5° (Gaussian-CDF ramp of the hazard); switch_time_s: τ = 0.015 s
         (hazard 1/τ far past the mid-point). The first design sketch suggested 0.7° and 0.2 s
         (docs/design.md §6); with those the stall time at 19.9° varies so much from cycle to cycle
-        that even the period-averaged response explains only ~40% of a sine's variance (relative
-        error 0.6-0.8), far from the paper's rig, where PNLSS reaches 0.16-0.25 at the high level.
-        0.015 s / 0.5° keep the randomness (clustering still sees it) but make the hysteresis loop
-        repeatable enough (0.015 s: the 1.6 Hz sine floor drops from 0.30 to 0.18).
+        that even the period-averaged response explains only ~40% of a sine's variance, and
+        the per-cycle randomness buries the stall-type regimes below: measured on the default
+        campaign, the high level's SNR near 1.02 Hz is 15.6 dB (paper: 9 dB; 20 dB with 0.5° /
+        0.015 s) but its periods form one cluster (docs/plant.md §7).
         separation_noise_std, separation_noise_time_s: Ornstein–Uhlenbeck noise on √f in
         separated flow (σ = 0.03 → C_l std ≈ 0.045 fully separated at 25°).
     Stall-type regimes (docs/plant.md §2; a two-state Markov process in time)
@@ -201,10 +201,10 @@ class WingParams(RigGeometry):
         return self.velocity_m_s * self.chord_m / 1.5e-5
 
 
-# Named parameter sets (docs/plant.md §2, "Presets"). "stall_regimes" is the default wing;
-# "repeatable_stall" is the wing of release 0.1 and the first wave, before the stall-type regimes:
-# every period at the high offset follows one regime, the bistable switch alone varies from
-# cycle to cycle. It gives bit for bit the results of that plant for a seed.
+# Named parameter sets (docs/plant.md, "Presets"). "stall_regimes" is the default wing;
+# "repeatable_stall" is the wing of release 0.1, before the stall-type regimes: every period at
+# the high offset in deep stall, only the stall switch varying from cycle to cycle. It gives bit
+# for bit the results of that plant for a seed.
 PRESETS: dict[str, dict[str, Any]] = {
     "stall_regimes": {},
     "repeatable_stall": {"light_stall_fraction": 0.0},
