@@ -8,10 +8,13 @@ puts the last period of the high level's estimation realization in the light reg
 the plant's truth, so the scenario cannot drift silently). The all-levels PNLSS is trained on
 that realization's mean period.
 
-Not asserted: that clustering lowers the BLA's nonlinear variance. The robust method books a
-period that differs from the others of its realization as noise (var_nl = var_total −
-var_noise), and dropping it lowers var_noise by more than var_total, so the var_nl estimate
-rises; measured on the default campaign and explained in docs/plant.md §7.
+Not asserted: that clustering lowers the BLA's nonlinear variance. The robust method estimates
+var_nl as the excess of the spread between the realizations' FRFs over the spread between
+periods. A period in another regime raises both by the same amount in expectation when it is
+the only one (M = 2), lowers var_nl when each realization has one (the default campaign's case:
+only the period spread grows), and raises it only when the regime falls unevenly on the
+realizations; with M = 2 the estimate's own scatter is of the same size. Measured on the default
+campaign and explained in docs/plant.md §7.
 """
 
 from functools import cache
