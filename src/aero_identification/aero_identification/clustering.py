@@ -64,12 +64,13 @@ def period_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarray:
 
     The features were the period's output waveform minus its realization's median period
     before (the paper's §3.4 clusters in the time domain). Measured on the simulated wing with
-    persistent stall regimes (docs/plant.md §2), those waveform deviations split the periods by
-    realization rather than by regime, since the same regime deviates differently under another
-    phase realization; the stall events that differ at random from period to period spread over
-    all N samples and kept the silhouette of real regimes at 0.33-0.45, below the 0.5 of
-    structure, while the lift-curve features give 0.62-0.74 for the same periods and stay below
-    0.5 where no regime is present.
+    stall-type regimes (docs/plant.md §2; the default plan through `aero_rig.simulation`, plant
+    seeds 0, 1 and 4, each with light-stall periods at 19.9°), the waveform features gave a best
+    silhouette of 0.33-0.45, below the 0.5 of structure, so the regimes went undetected: the
+    same regime deviates differently under another phase realization, and the stall events that
+    differ at random between periods spread over all N samples. The lift-curve features give
+    0.62-0.72 on the same data, with the light-stall periods in the minority clusters, and stay
+    below 0.5 at 6.6° and 15.7° (0.84 on the default campaign's high level).
 
     The realization's median lift curve is subtracted because the lift curve of a multisine
     also depends on its phase realization (dynamics, hysteresis); periods of the realization's

@@ -776,7 +776,7 @@ def write_report(
                 out / f"clusters_{tag}.png",
                 y=_clustered_outputs(assembler, result, lv.level),
                 fs=result.fs,
-                title=f"Clusters, {lv.name} level (k = {lv.clusters.k}; colour 0 kept)",
+                title=f"Clusters, {lv.name} level (k = {lv.clusters.k})",
             )
     if result.clustering_effect:
         path = out / "clustering.md"
