@@ -215,6 +215,10 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     if level1.exists():
         print("\nTable 1, trained on level 1 only (the paper's variant):")
         print(level1.read_text())
+    clustering = run_dir / "clustering.md"
+    if clustering.exists():
+        print("\nWhat the period clustering changed (clustering.md, table1_no_clustering.md):")
+        print("\n".join(x for x in clustering.read_text().splitlines() if x.startswith("|")))
     print(
         f"\nwall time {summary['wall_s']} s for {summary['experiment_s']} s of experiment "
         f"({summary['real_time_factor']}x real time)"
@@ -303,6 +307,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
     print(tables["all_levels"][0])
     print("\nTable 1, trained on level 1 only:")
     print(tables["level1"][0])
+    if "no_clustering" in tables:
+        print("\nTable 1, trained on all levels, without clustering (every valid period):")
+        print(tables["no_clustering"][0])
     print(f"\nreport: {out.resolve()}")
     problems = data_quality_lines(result.data_quality)
     if problems:
