@@ -35,14 +35,9 @@ from typing import Any
 import yaml
 from rosbags.highlevel import AnyReader
 
+from aero_rig.verdict import STREAM_TOPICS
 from rig_runtime.graph import load_graph, package_share
-from rig_runtime.interface import (
-    EXPERIMENT_PLAN,
-    PITCH_COMMAND,
-    PITCH_STATE,
-    PRESSURE_TAPS,
-    WING_COEFFICIENTS,
-)
+from rig_runtime.interface import EXPERIMENT_PLAN
 from rig_runtime.launcher import Launcher, node_command
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.testing import (
@@ -56,7 +51,6 @@ from rig_runtime.testing import (
 )
 
 SIM = package_share("aero_rig") / "config" / "sim.yaml"
-STREAM = (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name)
 MEMBERS = ["sim_actuator", "sim_wing", "lift", "identifier", "recorder"]
 
 
@@ -142,11 +136,13 @@ def after_first_realization(
 def measure(run: Path, reference: Path | None) -> dict[str, Any]:
     """Samples lost in the bag, what the identification excluded, Table 1 against idle."""
     figures: dict[str, Any] = {}
-    stamps: dict[str, set[int]] = {t: set() for t in STREAM}
+    stamps: dict[str, set[int]] = {t: set() for t in STREAM_TOPICS}
     plan: dict[str, Any] | None = None
     try:
         with AnyReader([run / "bag"]) as reader:
-            conns = [c for c in reader.connections if c.topic in (*STREAM, EXPERIMENT_PLAN.name)]
+            conns = [
+                c for c in reader.connections if c.topic in (*STREAM_TOPICS, EXPERIMENT_PLAN.name)
+            ]
             for conn, _, raw in reader.messages(connections=conns):
                 msg: Any = reader.deserialize(raw, conn.msgtype)
                 if conn.topic == EXPERIMENT_PLAN.name:
@@ -159,7 +155,7 @@ def measure(run: Path, reference: Path | None) -> dict[str, Any]:
         expected = {
             plan["t0_ns"] + round(k * 1e9 / plan["fs"]) for k in range(plan["total_samples"])
         }
-        figures["samples_lost"] = {t: len(expected - stamps[t]) for t in STREAM}
+        figures["samples_lost"] = {t: len(expected - stamps[t]) for t in STREAM_TOPICS}
     else:
         figures["samples_lost"] = "no plan in the bag (nothing was streamed)"
     models = run / "models.json"

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
+from aero_rig.verdict import STREAM_TOPICS
 from rig_runtime.interface import (
     EXPERIMENT_PLAN,
     PITCH_COMMAND,
@@ -80,7 +81,6 @@ def campaign(
     return run, proc
 
 
-STREAM_TOPICS = (PITCH_COMMAND.name, PITCH_STATE.name, PRESSURE_TAPS.name, WING_COEFFICIENTS.name)
 # What a run that lost its stream logs (the first wave's failure under load: the actuator ran on
 # in real time and its time went backwards); every anomaly is logged as "anomaly: ...".
 CORRUPTION_SIGNS = ("running on in real time", "time went backwards", "anomaly:")

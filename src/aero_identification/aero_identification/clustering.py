@@ -9,6 +9,7 @@ independent cycle-to-cycle events. The features are each period's lift curve C_l
 (`period_features`).
 """
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,18 +84,20 @@ def period_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarray:
     if bins < 2:
         raise ValueError(f"bins must be >= 2; got {bins}")
     edges = np.quantile(data.u, np.linspace(0.0, 1.0, bins + 1)[1:-1])
-    index = np.searchsorted(edges, data.u, side="right")  # (N, P, M) bin of every sample
-    curves = np.zeros((data.P, data.M, bins))
-    for p in range(data.P):
-        for m in range(data.M):
-            counts = np.bincount(index[:, p, m], minlength=bins)
-            sums = np.bincount(index[:, p, m], weights=data.y[:, p, m], minlength=bins)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                curves[p, m] = sums / counts  # NaN in a bin this period never visits
+    # One bincount over all periods: sample (n, p, m) goes to slot (p·M + m)·bins + its bin.
+    period = np.arange(data.P * data.M).reshape(data.P, data.M)
+    slot = (np.searchsorted(edges, data.u, side="right") + bins * period).ravel()
+    size = data.P * data.M * bins
+    counts = np.bincount(slot, minlength=size).reshape(data.P, data.M, bins)
+    sums = np.bincount(slot, weights=data.y.ravel(), minlength=size).reshape(counts.shape)
+    with np.errstate(invalid="ignore"):
+        curves = sums / counts  # NaN in a bin a period never visits
     # A bin a period never visits takes its realization's mean there (or zero deviation).
-    fill = np.nanmean(np.where(np.isfinite(curves), curves, np.nan), axis=0, keepdims=True)
-    curves = np.where(np.isfinite(curves), curves, np.broadcast_to(fill, curves.shape))
-    curves = np.nan_to_num(curves)
+    if np.isnan(curves).any():
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # bins no period visits
+            fill = np.nanmean(curves, axis=0, keepdims=True)
+        curves = np.nan_to_num(np.where(np.isnan(curves), fill, curves))
     deviation = curves - np.median(curves, axis=0, keepdims=True)
     X = deviation.reshape(data.P * data.M, bins)
     scale = np.sqrt(np.mean(X**2))
@@ -160,8 +163,8 @@ def period_clusters(
 
 
 def _principal_coordinates(X: np.ndarray, n_components: int | None) -> np.ndarray:
-    """Exact rotation onto the (at most n − 1) principal directions: the same distances, far
-    fewer columns for k-means than the N samples of a waveform."""
+    """Exact rotation onto the (at most n − 1) principal directions (the same distances), cut
+    to `n_components` if given."""
     _, s, Vt = np.linalg.svd(X, full_matrices=False)
     rank = int(np.sum(s > s[0] * 1e-12)) if s.size and s[0] > 0 else 0
     if n_components is not None:

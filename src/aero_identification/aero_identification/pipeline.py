@@ -400,21 +400,19 @@ def clustering_effect(
             entry[f"bla_{tag}"]["var_noise_db"] = float(
                 10 * np.log10(np.mean(bla.var_noise * bla.M * bla.P / g2))
             )
-        val = cfg.validation_realization
-        if (level, val) in assembler.blocks:
-            cols = _kept_columns(assembler, clustered, level, val)
-            block = assembler.blocks[(level, val)]
-            if len(cols):
-                u = block.u[:, cols].mean(axis=1)
-                y = block.y[:, cols].mean(axis=1)
-                for tag, model in (("with", clustered.pnlss_all), ("without", plain.pnlss_all)):
-                    if model is None:
-                        continue
-                    y_hat = steady_state_response(model, u, block.N)
-                    entry[f"pnlss_validation_{tag}"] = (
-                        relative_rms_error(y, y_hat) if np.all(np.isfinite(y_hat)) else None
-                    )
-                entry["validation_periods"] = len(cols)
+        # The PNLSS fit's own validation record of this level: its kept periods' mean.
+        sets = _pnlss_sets(assembler, [level], clustered, cfg) if lv.bla is not None else None
+        if sets is not None:
+            u, y = sets[1].u[:, 0, 0], sets[1].y[:, 0, 0]
+            for tag, model in (("with", clustered.pnlss_all), ("without", plain.pnlss_all)):
+                if model is None:
+                    continue
+                y_hat = steady_state_response(model, u, u.size)
+                entry[f"pnlss_validation_{tag}"] = (
+                    relative_rms_error(y, y_hat) if np.all(np.isfinite(y_hat)) else None
+                )
+            val = cfg.validation_realization
+            entry["validation_periods"] = len(_kept_columns(assembler, clustered, level, val))
         effect[lv.name] = entry
     return effect
 
@@ -462,23 +460,18 @@ def _kept_columns(
 def _clustered_outputs(
     assembler: CampaignAssembler, result: IdentificationResult, level: int
 ) -> np.ndarray | None:
-    """(N, P, M) outputs of the periods the level's clustering labelled (estimation and
-    validation realization), or None when they are not in the assembler any more."""
+    """(N, P, M) outputs of the periods the level's clustering labelled (the `_periodic` data
+    of step 1), or None without clusters."""
     clusters = result.levels[level].clusters
     if clusters is None:
         return None
     cfg = result.config
-    count = clusters.labels.shape[0]
-    ys = []
-    for m in (cfg.estimation_realization, cfg.validation_realization):
-        block = assembler.blocks.get((level, m))
-        if block is None:
-            return None
-        cols = _valid_periods(block)[-count:]
-        if len(cols) != count:
-            return None
-        ys.append(block.y[:, cols])
-    return np.stack(ys, axis=2)
+    blocks = [
+        assembler.blocks[(level, m)]
+        for m in (cfg.estimation_realization, cfg.validation_realization)
+    ]
+    lines = _excited_lines(assembler, level, cfg.estimation_realization)
+    return _periodic(blocks, result.fs, lines, clusters.labels.shape[0]).y
 
 
 def _level_signature(
@@ -603,7 +596,10 @@ def _fit_pnlss(
     lin = result.linear_level1
     assert lin is not None
     try:
-        start = _output_equation_start(data, lin, config, validation, weights, val_weights)
+        start = output_equation_start(
+            data, lin, degrees=config.degrees, structure=config.structure, validation=validation,
+            record_weights=weights, validation_weights=val_weights,
+        )  # fmt: skip
         return fit_pnlss(
             data,
             lin,
@@ -630,21 +626,6 @@ def _level_weights(data: PeriodicData, weighting: str) -> np.ndarray | None:
     if not np.all(var > 0):
         raise ValueError("a level's output is constant: relative weighting is undefined")
     return 1.0 / var
-
-
-def _output_equation_start(
-    data: PeriodicData,
-    lin: LinearStateSpace,
-    config: IdentificationConfig,
-    validation: PeriodicData,
-    weights: np.ndarray | None = None,
-    val_weights: np.ndarray | None = None,
-) -> PNLSSModel:
-    """The pipeline's PNLSS start (pnlss.output_equation_start) with the config's structure."""
-    return output_equation_start(
-        data, lin, degrees=config.degrees, structure=config.structure, validation=validation,
-        record_weights=weights, validation_weights=val_weights,
-    )  # fmt: skip
 
 
 def _validate_on_sines(

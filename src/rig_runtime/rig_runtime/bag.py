@@ -60,11 +60,11 @@ class FileStats:
     count: int = 0
     counts: dict[str, int] = field(default_factory=dict)  # per topic
 
-    def add(self, topic: str, timestamp_ns: int, n: int = 1) -> None:
+    def add(self, topic: str, timestamp_ns: int) -> None:
         self.start_ns = min(self.start_ns, timestamp_ns)
         self.end_ns = max(self.end_ns, timestamp_ns)
-        self.count += n
-        self.counts[topic] = self.counts.get(topic, 0) + n
+        self.count += 1
+        self.counts[topic] = self.counts.get(topic, 0) + 1
 
 
 @dataclass
@@ -211,11 +211,6 @@ class BagWriter:
         are those of the closed files until :func:`rig_runtime.bag_recover.recover_bag`."""
         if self._mcap is not None:
             self._mcap.flush()
-
-    def split(self) -> None:
-        """Finish the open file (footer, summary); the next message opens a new one."""
-        self._close_file()
-        self._write_metadata()
 
     def _close_file(self) -> None:
         if self._mcap is not None and self._stream is not None:

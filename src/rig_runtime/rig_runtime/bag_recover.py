@@ -99,24 +99,24 @@ def _collect(record: Any, scan: _Scan) -> None:
         scan.channels[record.id] = record
 
 
-def is_intact(path: Path) -> bool:
-    """Whether the file has a valid footer and summary (what indexed readers need)."""
+def _summary(path: Path) -> Any:
+    """The file's MCAP summary (footer and summary section), or None when it has none."""
     from mcap.reader import make_reader
 
     try:
         with path.open("rb") as f:
-            return make_reader(f).get_summary() is not None
+            return make_reader(f).get_summary()
     except Exception:
-        return False
+        return None
 
 
-def _intact_stats(path: Path, name: str, topics: dict[str, TopicInfo]) -> FileStats:
-    from mcap.reader import make_reader
+def is_intact(path: Path) -> bool:
+    """Whether the file has a valid footer and summary (what indexed readers need)."""
+    return _summary(path) is not None
 
+
+def _intact_stats(summary: Any, name: str, topics: dict[str, TopicInfo]) -> FileStats:
     stats = FileStats(name)
-    with path.open("rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None
     for channel in summary.channels.values():
         _topic_of(channel, summary.schemas, topics)
     if summary.statistics is not None and summary.statistics.message_count:
@@ -242,8 +242,9 @@ def recover_bag(bag: str | Path, into: str | Path | None = None) -> list[FileRep
         if not src.exists():
             reports.append(FileReport(name, False, FileStats(name), "file missing"))
             continue
-        if is_intact(src):
-            reports.append(FileReport(name, True, _intact_stats(src, name, topics)))
+        summary = _summary(src)
+        if summary is not None:
+            reports.append(FileReport(name, True, _intact_stats(summary, name, topics)))
             if into is not None:
                 (out_dir / name).symlink_to(src.resolve())
             continue

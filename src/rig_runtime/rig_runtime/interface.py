@@ -144,17 +144,8 @@ TOPICS: tuple[Topic, ...] = (
 # files' `record:=true`): the experiment's data, what the offline fit must exclude, the
 # identifier's results and the diagnostics. Commands to the rig (stop, tare) and the start
 # barrier's reports are not data.
-RECORDED_TOPICS: tuple[Topic, ...] = (
-    PITCH_COMMAND,
-    PITCH_STATE,
-    PRESSURE_TAPS,
-    WING_COEFFICIENTS,
-    EXPERIMENT_PLAN,
-    EXPERIMENT_SEGMENT,
-    EXPERIMENT_ANOMALY,
-    IDENTIFICATION_STATUS,
-    IDENTIFICATION_MODEL,
-    DIAGNOSTICS,
+RECORDED_TOPICS: tuple[Topic, ...] = tuple(
+    t for t in TOPICS if t not in (PITCH_STOP, PRESSURE_TARE, GRAPH_READY)
 )
 
 # Joint names in sensor_msgs/JointState.

@@ -7,7 +7,6 @@ Deterministic for a seed whatever the speed. A state without a finite pitch gets
 and is reported on ``/experiment/anomaly`` (``no_pitch``).
 """
 
-import math
 import sys
 from typing import Any
 
@@ -77,7 +76,7 @@ class SimWing:
         # The plant's truth when the actuator gives it, else the measured pitch.
         joint = ALPHA_TRUE_JOINT if ALPHA_TRUE_JOINT in msg.name else PITCH_JOINT
         alpha = joint_position(msg, joint)
-        if alpha is None or not math.isfinite(alpha):
+        if alpha is None:  # joint_position: None for a missing or non-finite joint
             self.refused += 1
             self.node.anomalies.point(
                 "no_pitch",
