@@ -5,26 +5,24 @@ from typing import Any
 
 import numpy as np
 
-from rig_runtime.dds_backend import DdsSubscription
 from rig_runtime.interface import DIAGNOSTICS
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.node import Node
+from rig_runtime.node import Node, Subscription
 
 
 class Observer:
-    """Subscribes (in the test process, DDS backend) and keeps (stamp_ns, values) per topic."""
+    """In-process subscriber (on the run's backend) keeping (stamp_ns, values) per topic."""
 
     def __init__(self, topics: dict[str, tuple[str, str]]) -> None:
-        self.node = Node("test_observer", argv=[], backend="dds")
+        self.node = Node("test_observer", argv=[])
         self.data: dict[str, list[tuple[int, Any]]] = defaultdict(list)
-        self.subs: list[DdsSubscription] = []
+        self.subs: list[Subscription] = []
         for topic, (type_name, qos) in topics.items():
 
             def store(msg: Any, topic: str = topic) -> None:
                 self._store(topic, msg)
 
             sub = self.node.create_subscription(type_name, topic, store, qos=qos)
-            assert isinstance(sub, DdsSubscription)  # backend="dds"
             self.subs.append(sub)
 
     def _store(self, topic: str, msg: Any) -> None:

@@ -214,7 +214,7 @@ def test_a_free_running_actuator_is_reported_excluded_and_fails_the_campaign(
     real time (the first wave's corruption). The run must say so and exit non-zero."""
     env = graph_env()
     join_graph(env, monkeypatch.setenv)
-    watcher = Node("fault_watcher", argv=[], backend="dds")
+    watcher = Node("fault_watcher", argv=[])
     events: list[dict[str, object]] = []
     watcher.create_subscription(
         EXPERIMENT_SEGMENT.type,

@@ -46,7 +46,7 @@ class ActuatorClient:
     """In-process DDS node: commands the actuator and collects its states and diagnostics."""
 
     def __init__(self) -> None:
-        self.node = Node("safety_test", argv=[], backend="dds")
+        self.node = Node("safety_test", argv=[])
         self.cmd = self.node.create_publisher(
             PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )

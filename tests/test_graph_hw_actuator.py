@@ -34,7 +34,7 @@ class HwClient:
     """In-process DDS node: publishes commands in real time, collects states and diagnostics."""
 
     def __init__(self) -> None:
-        self.node = Node("hw_test", argv=[], backend="dds")
+        self.node = Node("hw_test", argv=[])
         self.cmd = self.node.create_publisher(
             PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )

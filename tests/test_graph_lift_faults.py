@@ -30,7 +30,7 @@ ALPHA_DEG = 8.0
 
 class LiftClient:
     def __init__(self) -> None:
-        self.node = Node("lift_test", argv=[], backend="dds")
+        self.node = Node("lift_test", argv=[])
         self.state_pub = self.node.create_publisher(
             PITCH_STATE.type, PITCH_STATE.name, PITCH_STATE.qos
         )

@@ -42,7 +42,7 @@ NOISE_PA = 0.5  # wind-off reading noise (sim_scanner default)
 
 class ScannerClient:
     def __init__(self) -> None:
-        self.node = Node("scanner_test", argv=[], backend="dds")
+        self.node = Node("scanner_test", argv=[])
         self.tare = self.node.create_publisher(PRESSURE_TARE.type, PRESSURE_TARE.name)
         self.frames: list[tuple[int, np.ndarray]] = []
         self.diagnostics: list[dict[str, str]] = []

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from aero_identification.quality import data_quality_lines
+from rig_runtime import ros_environment
 from rig_runtime.graph import GraphError, GraphSpec, load_graph, package_share
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, IDENTIFICATION_STATUS
 from rig_runtime.launcher import Launcher, parse_overrides
@@ -75,8 +76,9 @@ class CampaignMonitor:
     def __init__(self) -> None:
         from rig_runtime.node import Node
 
-        self.node = Node("aero_rig_campaign", argv=[], backend="dds")
+        self.node = Node("aero_rig_campaign", argv=[])  # the graph's backend (the env's)
         self.total = 0
+        self.fs = 0.0  # the plan's sample rate [Hz]
         self.k = 0
         self.state = ""
         self.model: dict[str, Any] | None = None
@@ -94,7 +96,9 @@ class CampaignMonitor:
         )
 
     def _plan(self, msg: Any) -> None:
-        self.total = int(json.loads(msg.data)["total_samples"])
+        plan = json.loads(msg.data)
+        self.total = int(plan["total_samples"])
+        self.fs = float(plan["fs"])
 
     def _segment(self, msg: Any) -> None:
         event = json.loads(msg.data)
@@ -116,9 +120,30 @@ class CampaignMonitor:
         self.node.close()
 
 
+def backend_label(backend: str) -> str:
+    return "rclpy (Fast DDS)" if backend == "rclpy" else "the Cyclone DDS backend"
+
+
+def checked_backend() -> str:
+    """The runtime backend of the graph to start, or SystemExit(2) with one clear line."""
+    try:
+        backend = ros_environment.check()
+    except ros_environment.RosEnvironmentError as exc:
+        print(f"aero-rig: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    if backend == "dds" and not os.environ.get(ros_environment.BACKEND_ENV):
+        print(
+            "aero-rig: rclpy does not import here; the graph runs on the Cyclone DDS backend "
+            f"(for rclpy: {ros_environment.INSTALL_RCLPY})",
+            file=sys.stderr,
+        )
+    return backend
+
+
 def cmd_campaign(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    backend = checked_backend()
     user_overrides = parse_overrides(args.overrides)
     graph = load_graph(Path(args.graph) if args.graph else _config("sim.yaml"))
     run_dir = _run_dir(args.out)
@@ -139,9 +164,15 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         },
         user_overrides,
     )
-    env = {"RIG_RUNTIME_BACKEND": "dds"}
+    # Every node, and the monitor in this process, on one backend; a simulated campaign stays
+    # on this machine unless a discovery range was chosen (ros_environment.py).
+    env = {"RIG_RUNTIME_BACKEND": backend}
     os.environ.update(env)
-    print(f"aero-rig: campaign '{args.plan}' -> {run_dir}", file=sys.stderr)
+    ros_environment.localhost_by_default(os.environ)
+    print(
+        f"aero-rig: campaign '{args.plan}' on {backend_label(backend)} -> {run_dir}",
+        file=sys.stderr,
+    )
     launcher = Launcher(graph, env=env, overrides=overrides, log_dir=run_dir / "logs")
     monitor = CampaignMonitor()
     started = time.monotonic()
@@ -202,8 +233,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     problems = run_problems(run_dir, monitor.total)
     summary = {
         "wall_s": round(wall, 1),
-        "experiment_s": round(monitor.total / 200.0, 1) if monitor.total else None,
-        "real_time_factor": round(monitor.total / 200.0 / wall, 1) if monitor.total else None,
+        "backend": backend,
+        "experiment_s": round(monitor.total / monitor.fs, 1) if monitor.total else None,
+        "real_time_factor": round(monitor.total / monitor.fs / wall, 1) if monitor.total else None,
         "exit_codes": codes,
         "clean": not problems,
         "problems": problems,
@@ -245,6 +277,10 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    backend = checked_backend()
+    if args.which == "sim":
+        ros_environment.localhost_by_default(os.environ)
+    print(f"aero-rig: {args.which} graph on {backend_label(backend)}", file=sys.stderr)
     graph = load_graph(Path(args.graph) if args.graph else _config(f"{args.which}.yaml"))
     graph = _with_view(graph, args.rerun, None)
     overrides: dict[str, dict[str, Any]] = {}

@@ -387,7 +387,7 @@ def test_view_node_records_what_it_receives_over_dds(
         IDENTIFICATION_MODEL.name: ("std_msgs/msg/String", "latched"),
         IDENTIFICATION_STATUS.name: ("diagnostic_msgs/msg/DiagnosticArray", "latched"),
     }
-    node = Node("test_view_publisher", argv=[], backend="dds")
+    node = Node("test_view_publisher", argv=[])
     try:
         pubs = {t: node.create_publisher(ty, t, qos) for t, (ty, qos) in topics.items()}
         # Published before the view exists: the latched model must still reach it.

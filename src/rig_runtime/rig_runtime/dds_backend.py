@@ -11,11 +11,10 @@
   ``ros_discovery_info`` (``rmw_dds_common/msg/ParticipantEntitiesInfo``), as rmw_cyclonedds
   does, so ``ros2 node list`` on a ROS 2 machine sees them; the participant carries
   ``enclave=/;`` in USER_DATA like an rmw participant.
-- Domain from ``ROS_DOMAIN_ID``. Default network: loopback only, unicast discovery, no
-  multicast. ``RIG_DDS_NETWORK=lan`` lets Cyclone pick the lab interface with multicast
-  discovery (like a stock ROS 2 install); ``CYCLONEDDS_URI`` (if set) wins over both.
-  ``RIG_DDS_MAX_PARTICIPANTS`` (default 32) bounds the unicast participant indices, i.e. how
-  many processes one domain holds on one host.
+- Domain from ``ROS_DOMAIN_ID``; network from ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and
+  ``ROS_STATIC_PEERS`` as rmw_cyclonedds maps them (cyclone_config; ros_environment.py);
+  ``CYCLONEDDS_URI`` (if set) wins. ``RIG_DDS_MAX_PARTICIPANTS`` (default 32) bounds the
+  unicast participant indices on LOCALHOST, i.e. how many processes one domain holds.
 """
 
 import ctypes
@@ -52,6 +51,7 @@ from .barrier import Endpoint
 from .dds_types import idl_struct
 from .messages import deserialize, new_message, normalize_type_name, serialize, type_hash
 from .qos import PROFILES, QosProfile
+from .ros_environment import discovery_range, domain_id, static_peers
 
 # How long a reliable keep-all writer may block while a reader does not acknowledge (a paused
 # or starved process). Longer than Cyclone's participant lease (10 s): a reader that is gone
@@ -74,34 +74,46 @@ _dds_write_flush.argtypes = [ctypes.c_int32]
 _dds_write_flush.restype = ctypes.c_int32
 
 
-def domain_id() -> int:
-    text = os.environ.get("ROS_DOMAIN_ID", "0").strip() or "0"
-    try:
-        value = int(text)
-    except ValueError:
-        raise ValueError(f"ROS_DOMAIN_ID={text!r} is not an integer") from None
-    if not 0 <= value <= 232:
-        raise ValueError(f"ROS_DOMAIN_ID={value} is outside 0..232")
-    return value
-
-
 def cyclone_config() -> str | None:
-    """The Cyclone DDS XML configuration this process uses (None: CYCLONEDDS_URI applies)."""
+    """The Cyclone DDS XML configuration this process uses, from the ROS 2 discovery
+    variables as rmw_cyclonedds_cpp (Jazzy) maps them (None: Cyclone's own default or
+    ``CYCLONEDDS_URI`` applies).
+
+    - LOCALHOST: the loopback interface only, no multicast, unicast discovery of the
+      participant indices on 127.0.0.1;
+    - SUBNET: Cyclone's default interface with multicast discovery;
+    - OFF: loopback, no multicast and no peers: no other process is discovered;
+    - SYSTEM_DEFAULT: Cyclone's own configuration untouched.
+    ``ROS_STATIC_PEERS`` are added as peers (except with OFF).
+    """
     if os.environ.get("CYCLONEDDS_URI"):
         return None
-    network = os.environ.get("RIG_DDS_NETWORK", "loopback").strip().lower()
-    if network == "lan":
+    scope = discovery_range()
+    peers = static_peers()
+    if scope == "SYSTEM_DEFAULT" or (scope == "SUBNET" and not peers):
         return None
-    if network != "loopback":
-        raise ValueError(f"RIG_DDS_NETWORK={network!r}: expected 'loopback' or 'lan'")
     max_index = int(os.environ.get("RIG_DDS_MAX_PARTICIPANTS", "32"))
+    general = ""
+    discovery = ""
+    if scope in ("LOCALHOST", "OFF"):
+        general = (
+            '<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
+            "<AllowMulticast>false</AllowMulticast></General>"
+        )
+    if scope == "LOCALHOST":
+        peers = ["127.0.0.1", *peers]
+    if scope == "OFF":
+        peers = []
+    if scope in ("LOCALHOST", "OFF"):
+        discovery += (
+            "<ParticipantIndex>auto</ParticipantIndex>"
+            f"<MaxAutoParticipantIndex>{max_index}</MaxAutoParticipantIndex>"
+        )
+    if peers:
+        discovery += "<Peers>" + "".join(f'<Peer address="{p}"/>' for p in peers) + "</Peers>"
     return (
         '<CycloneDDS xmlns="https://cdds.io/config"><Domain Id="any">'
-        '<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
-        "<AllowMulticast>false</AllowMulticast></General>"
-        "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
-        f"<MaxAutoParticipantIndex>{max_index}</MaxAutoParticipantIndex>"
-        '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+        f"{general}<Discovery>{discovery}</Discovery>"
         '<Internal><SocketReceiveBufferSize min="4MB"/><Watermarks><WhcHigh>4MB</WhcHigh>'
         "<WhcHighInit>4MB</WhcHighInit><WhcAdaptive>false</WhcAdaptive></Watermarks></Internal>"
         "<Tracing><Verbosity>severe</Verbosity><OutputFile>stderr</OutputFile></Tracing>"

@@ -12,8 +12,10 @@ A node module declares its parameters and a class that takes a :class:`Node`::
     def main(argv=None) -> int:
         return run_node(Generator, "generator", PARAMETERS, argv, description=__doc__)
 
-The backend is chosen once per process: rclpy when it imports (a ROS 2 machine), Cyclone DDS
-otherwise; ``RIG_RUNTIME_BACKEND=dds|rclpy`` overrides. Both speak ROS 2 on the wire.
+The backend is chosen once per process: rclpy when it imports (the PyPI wheels or a sourced
+ROS 2 Jazzy), the Cyclone DDS backend otherwise
+(rclpy_backend.py, dds_backend.py); ``RIG_RUNTIME_BACKEND=dds|rclpy`` overrides. Both speak
+ROS 2 on the wire.
 """
 
 import logging
@@ -25,14 +27,15 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+from . import ros_environment
 from .anomaly import Anomaly, AnomalyLog
 from .barrier import Endpoint, ReadinessReport
 from .interface import EXPERIMENT_ANOMALY, GRAPH_READY
 from .names import ArgumentError, RosArgs, normalize_namespace, parse_ros_args, resolve_name
-from .params import Parameter, ParameterError, ParameterSet, resolve_parameters
+from .params import Parameter, ParameterError, resolve_parameters
 from .qos import QosProfile, resolve_qos
 
-BACKEND_ENV = "RIG_RUNTIME_BACKEND"
+BACKEND_ENV = ros_environment.BACKEND_ENV
 # Set by the launcher for its nodes: a node whose parent process is no longer the launcher
 # (it was killed, even with SIGKILL) stops instead of running on unattended.
 LAUNCHER_PID_ENV = "RIG_LAUNCHER_PID"
@@ -53,6 +56,8 @@ class Publisher(Protocol):
 class Subscription(Protocol):
     topic: str
     type_name: str
+
+    def publisher_count(self) -> int: ...
 
 
 class Timer(Protocol):
@@ -93,28 +98,9 @@ class Backend(Protocol):
 
 
 def select_backend_name() -> str:
-    choice = os.environ.get(BACKEND_ENV, "").strip().lower()
-    if choice in ("dds", "cyclonedds"):
-        return "dds"
-    if choice == "rclpy":
-        return "rclpy"
-    if choice:
-        raise ValueError(f"{BACKEND_ENV}={choice!r}: expected 'dds' or 'rclpy'")
-    try:
-        import rclpy  # noqa: F401
-    except ImportError:
-        return "dds"
-    return "rclpy"
-
-
-def _make_backend(name: str, node_name: str, namespace: str) -> Backend:
-    if name == "rclpy":
-        from .rclpy_backend import RclpyBackend
-
-        return RclpyBackend(node_name, namespace)
-    from .dds_backend import DdsBackend
-
-    return DdsBackend(node_name, namespace)
+    """``rclpy`` where it imports, else ``dds``; ``RIG_RUNTIME_BACKEND`` chooses explicitly
+    (ros_environment.backend_name; a clear error if the choice cannot be honoured)."""
+    return ros_environment.backend_name()
 
 
 class Node:
@@ -128,21 +114,48 @@ class Node:
         namespace: str = "/",
         backend: str | None = None,
     ) -> None:
-        ros_args = parse_ros_args(list(sys.argv[1:] if argv is None else argv))
-        self.ros_args: RosArgs = ros_args
-        self.name = ros_args.node_name or name
-        self.namespace = normalize_namespace(ros_args.namespace or namespace)
-        prefix = "" if self.namespace == "/" else self.namespace
-        self.fq_name = f"{prefix}/{self.name}"
-        # Parameters are validated before any middleware entity exists (docs/design.md §8).
-        self.params: ParameterSet = resolve_parameters(
-            parameters, self.fq_name, ros_args.param_files, ros_args.overrides
-        )
-        self.logger = _make_logger(self.fq_name, ros_args.log_level)
+        args = list(sys.argv[1:] if argv is None else argv)
+        backend_name = backend or ros_environment.check()
+        if backend_name == "rclpy":
+            # rcl parses --ros-args (names, remaps, -p, --params-file, --log-level) and holds
+            # the parameters, with descriptors, for `ros2 param` (rclpy_backend.py).
+            from .rclpy_backend import RclpyBackend
+
+            rclpy_backend = RclpyBackend(name, namespace, args)
+            try:
+                self.ros_args = RosArgs()
+                self.name = rclpy_backend.node_name
+                self.namespace = rclpy_backend.namespace
+                self.fq_name = _fq_name(self.namespace, self.name)
+                self.params = rclpy_backend.declare_parameters(parameters)
+            except Exception:
+                rclpy_backend.close()
+                raise
+            self.logger = _make_logger(
+                self.fq_name, rclpy_backend.log_level, rclpy_backend.log_handler()
+            )
+            rclpy_backend.on_parameter_change(
+                lambda n, v: self.logger.info("parameter %s set to %r", n, v)
+            )
+            self._backend: Backend = rclpy_backend
+        else:
+            ros_args = parse_ros_args(args)
+            self.ros_args = ros_args
+            self.name = ros_args.node_name or name
+            self.namespace = normalize_namespace(ros_args.namespace or namespace)
+            self.fq_name = _fq_name(self.namespace, self.name)
+            # Parameters are validated before any middleware entity exists (design.md §8).
+            self.params = resolve_parameters(
+                parameters, self.fq_name, ros_args.param_files, ros_args.overrides
+            )
+            level = ros_args.log_level or os.environ.get("RIG_LOG_LEVEL", "INFO")
+            self.logger = _make_logger(self.fq_name, logging.getLevelName(level.upper()))
+            from .dds_backend import DdsBackend
+
+            self._backend = DdsBackend(self.name, self.namespace)
         self.exit_code = 0
         self._shutdown_requested = False
         self._on_shutdown: list[Callable[[], None]] = []
-        self._backend = _make_backend(backend or select_backend_name(), self.name, self.namespace)
         # Only a direct child of that launcher watches it (not a process that inherited the
         # variable further down).
         launcher = os.environ.get(LAUNCHER_PID_ENV, "")
@@ -163,6 +176,10 @@ class Node:
         return self._backend.name
 
     def resolve_topic(self, topic: str) -> str:
+        """The fully qualified topic name after expansion and remapping (rcl's on rclpy)."""
+        resolve = getattr(self._backend, "resolve_topic", None)
+        if resolve is not None:
+            return str(resolve(topic))
         return resolve_name(topic, self.namespace, self.name, self.ros_args.remaps)
 
     def create_publisher(
@@ -345,18 +362,29 @@ class Node:
         self._backend.close()
 
 
-def _make_logger(fq_name: str, level: str | None) -> logging.Logger:
+def _fq_name(namespace: str, name: str) -> str:
+    prefix = "" if namespace == "/" else namespace
+    return f"{prefix}/{name}"
+
+
+def _make_logger(
+    fq_name: str, level: int | str, handler: logging.Handler | None = None
+) -> logging.Logger:
+    """The node's Python logger. On rclpy ``handler`` hands each record to the node's rcl
+    logger (console and /rosout); otherwise records go to stderr in rcutils' console format."""
     logger = logging.getLogger(f"rig{fq_name.replace('/', '.')}")
-    if not logger.handlers:
+    for old in list(logger.handlers):  # a node of the same name made before in this process
+        logger.removeHandler(old)
+    if handler is None:
         handler = logging.StreamHandler(sys.stderr)
         handler.setFormatter(
             logging.Formatter(
                 f"[%(levelname)s] [%(created).3f] [{fq_name.lstrip('/')}]: %(message)s"
             )
         )
-        logger.addHandler(handler)
-        logger.propagate = False
-    logger.setLevel((level or os.environ.get("RIG_LOG_LEVEL", "INFO")).upper())
+    logger.addHandler(handler)
+    logger.propagate = False
+    logger.setLevel(level)
     return logger
 
 

@@ -28,7 +28,9 @@ class Parameter:
     """A declared parameter. The type is the default's type (lists: their element type).
 
     ``min``/``max`` bound numbers (and every element of numeric lists); ``choices`` restricts
-    strings. ``read_only`` parameters cannot change after start (all of ours, today).
+    strings. ``read_only`` parameters cannot change after start; a live one
+    (``read_only=False``) can be set while the node runs (``ros2 param set`` on the rclpy
+    backend) and is read by the node at each use (``node.params[name]``).
     """
 
     name: str
@@ -38,6 +40,7 @@ class Parameter:
     max: float | None = None
     choices: tuple[str, ...] | None = None
     element_type: type | None = None  # for list parameters whose default is empty
+    read_only: bool = True
 
     @property
     def is_list(self) -> bool:

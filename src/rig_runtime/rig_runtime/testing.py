@@ -17,6 +17,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from .ros_environment import backend_name
+
 _counter = itertools.count()
 
 
@@ -26,17 +28,21 @@ def unique_domain_id() -> int:
 
 
 def graph_env(domain_id: int | None = None, **extra: str) -> dict[str, str]:
+    """The environment of a test graph: its own domain, loopback discovery, and the backend
+    of this run (``RIG_RUNTIME_BACKEND`` if set, else rclpy where it imports)."""
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(unique_domain_id() if domain_id is None else domain_id)
-    env["RIG_RUNTIME_BACKEND"] = "dds"
+    env["RIG_RUNTIME_BACKEND"] = backend_name()
     env.pop("CYCLONEDDS_URI", None)
-    env["RIG_DDS_NETWORK"] = "loopback"
+    env.pop("RIG_DDS_NETWORK", None)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_STATIC_PEERS", None)
     env["PYTHONUNBUFFERED"] = "1"
     env.update(extra)
     return env
 
 
-DDS_KEYS = ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK")
+DDS_KEYS = ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "ROS_AUTOMATIC_DISCOVERY_RANGE")
 
 
 def join_graph(env: dict[str, str], setenv: Callable[[str, str], None] | None = None) -> None:

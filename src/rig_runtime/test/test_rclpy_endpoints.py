@@ -1,45 +1,188 @@
-"""What the rclpy backend reports to the start barrier, with stand-ins for rclpy's entities
-(rclpy is not installable here; docs/ros_machine.md has the check on a ROS machine)."""
+"""The rclpy backend in one process, on real rclpy (the PyPI wheels): what it reports to the
+start barrier, its parameters (declared with descriptors, checked like the DDS backend's), its
+logs on /rosout, and the same message objects as the DDS backend."""
 
-from types import SimpleNamespace
+import logging
+import os
+from collections.abc import Iterator
 from typing import Any
+
+import numpy as np
+import pytest
 
 from rig_runtime.barrier import ReadinessReport, StartBarrier
 from rig_runtime.interface import PITCH_COMMAND
-from rig_runtime.qos import PROFILES, QosProfile
-from rig_runtime.rclpy_backend import RclpyBackend, RclpyPublisher
+from rig_runtime.names import ArgumentError
+from rig_runtime.node import Node
+from rig_runtime.params import Parameter, ParameterError
+from rig_runtime.testing import graph_env, join_graph
+
+rclpy = pytest.importorskip("rclpy", reason="rclpy not installed (the DDS backend is used)")
+
+PARAMS = [
+    Parameter("fs", 200.0, "sample rate [Hz]", min=1.0, max=10000.0),
+    Parameter("count", 3, "how many", min=0),
+    Parameter("names", [], "names", element_type=str),
+    Parameter("mode", "a", "mode", choices=("a", "b"), read_only=False),
+    Parameter("gain", 1.0, "a live gain", min=0.0, max=2.0, read_only=False),
+]
 
 
-def _backend(fq_name: str, endpoints: list[tuple[str, Any, QosProfile]]) -> RclpyBackend:
-    backend = object.__new__(RclpyBackend)  # no rclpy.init: only endpoints() is exercised
-    backend.node = SimpleNamespace(get_fully_qualified_name=lambda: fq_name)
-    backend._endpoints = endpoints
-    return backend
+@pytest.fixture
+def rclpy_env(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    join_graph(graph_env(RIG_RUNTIME_BACKEND="rclpy"), monkeypatch.setenv)
+    yield
 
 
-def test_counts_not_gids_and_the_barrier_decides_on_them() -> None:
-    writer = RclpyPublisher(
-        SimpleNamespace(get_subscription_count=lambda: 1),
-        PITCH_COMMAND.name,
-        "sensor_msgs/msg/JointState",
-        PROFILES["stream"],
+def test_counts_not_gids_and_the_barrier_decides_on_them(rclpy_env: None) -> None:
+    gen = Node("generator", argv=[])
+    act = Node("sim_actuator", argv=[])
+    try:
+        assert gen.backend_name == act.backend_name == "rclpy"
+        pub = gen.create_publisher(PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos)
+        barrier = StartBarrier(["sim_actuator"])
+        report = gen.readiness_report()
+        assert report.endpoints[0].matched is None and report.endpoints[0].matched_count == 0
+        act.create_subscription(
+            PITCH_COMMAND.type, PITCH_COMMAND.name, lambda m: None, PITCH_COMMAND.qos
+        )
+        barrier.update(act.readiness_report())
+        pending = barrier.pending(gen.readiness_report())
+        assert pending and all("of /pitch/command has matched 0 of 1" in p for p in pending)
+        assert gen.spin_until(lambda: pub.subscription_count() == 1, 10.0)
+        assert act.spin_until(
+            lambda: act.readiness_report().endpoints[0].matched_count == 1, 10.0
+        )
+        barrier.update(act.readiness_report())
+        endpoints = act.readiness_report().endpoints
+        assert endpoints[0].topic == PITCH_COMMAND.name and endpoints[0].reliable
+        assert barrier.pending(gen.readiness_report()) == []
+    finally:
+        gen.close()
+        act.close()
+
+
+def test_messages_are_the_runtime_s_own_on_both_ends(rclpy_env: None) -> None:
+    """Published as the runtime's CDR, received as the same dataclass with numpy arrays."""
+    talker = Node("talker", argv=[])
+    listener = Node("listener", argv=[])
+    got: list[Any] = []
+    try:
+        listener.create_subscription(
+            "sensor_msgs/msg/JointState", "/chatter", got.append, qos="stream"
+        )
+        pub = talker.create_publisher("sensor_msgs/msg/JointState", "/chatter", qos="stream")
+        assert talker.spin_until(lambda: pub.subscription_count() == 1, 10.0)
+        msg = talker.new_message("sensor_msgs/msg/JointState", name=["pitch"])
+        msg.position = np.array([0.25])
+        msg.header.stamp.sec = 7
+        pub.publish(msg)
+        assert listener.spin_until(lambda: len(got) == 1, 10.0)
+        assert isinstance(got[0].position, np.ndarray)
+        assert got[0].position.tolist() == [0.25] and got[0].name == ["pitch"]
+        assert got[0].header.stamp.sec == 7
+    finally:
+        talker.close()
+        listener.close()
+
+
+def test_parameters_come_from_rcl_and_keep_the_runtime_s_checks(rclpy_env: None) -> None:
+    node = Node(
+        "gen",
+        PARAMS,
+        ["--ros-args", "-r", "__ns:=/rig", "-p", "fs:=100", "-p", "names:=[ab, cd]"],
     )
-    reader = SimpleNamespace(topic_name=PITCH_COMMAND.name, get_publisher_count=lambda: 1)
-    gen = _backend("/generator", [("writer", writer, PROFILES["stream"])]).endpoints()
-    act = _backend("/sim_actuator", [("reader", reader, PROFILES["stream"])]).endpoints()
-    assert gen[0].matched is None and gen[0].matched_count == 1 and gen[0].kind == "writer"
-    assert act[0].topic == PITCH_COMMAND.name and act[0].matched_count == 1
-    assert not act[0].transient_local and act[0].reliable
-    barrier = StartBarrier(["sim_actuator"])
-    barrier.update(ReadinessReport("/sim_actuator", True, endpoints=tuple(act)))
-    assert barrier.pending(ReadinessReport("/generator", True, endpoints=tuple(gen))) == []
-    lonely = RclpyPublisher(
-        SimpleNamespace(get_subscription_count=lambda: 0),
-        PITCH_COMMAND.name,
-        "sensor_msgs/msg/JointState",
-        PROFILES["stream"],
-    )
-    gen = _backend("/generator", [("writer", lonely, PROFILES["stream"])]).endpoints()
-    assert barrier.pending(ReadinessReport("/generator", True, endpoints=tuple(gen))) == [
-        "/generator: its writer of /pitch/command has matched 0 of 1 member endpoints"
-    ]
+    try:
+        assert node.fq_name == "/rig/gen"
+        assert node.params["fs"] == 100.0 and isinstance(node.params["fs"], float)
+        assert node.params["names"] == ["ab", "cd"]
+        assert node.params.sources["fs"] == "--ros-args"
+        rnode = node._backend.node  # type: ignore[attr-defined]
+        descriptor = rnode.describe_parameter("fs")
+        assert descriptor.read_only and descriptor.description == "sample rate [Hz]"
+        assert descriptor.floating_point_range[0].from_value == 1.0
+        assert descriptor.floating_point_range[0].to_value == 10000.0
+        assert not rnode.describe_parameter("gain").read_only
+        assert rnode.get_parameter("count").value == 3
+        # A live change takes effect; a read-only or out-of-range one is refused with a reason.
+        from rclpy.parameter import Parameter as P
+
+        (ok,) = rnode.set_parameters([P("gain", P.Type.DOUBLE, 1.5)])
+        assert ok.successful and node.params["gain"] == 1.5
+        (refused,) = rnode.set_parameters([P("fs", P.Type.DOUBLE, 50.0)])
+        assert not refused.successful and "read-only" in refused.reason
+        (refused,) = rnode.set_parameters([P("gain", P.Type.DOUBLE, 3.0)])
+        assert not refused.successful and node.params["gain"] == 1.5
+        (refused,) = rnode.set_parameters([P("mode", P.Type.STRING, "c")])
+        assert not refused.successful and "one of ['a', 'b']" in refused.reason
+        assert node.params["mode"] == "a"
+    finally:
+        node.close()
+
+
+@pytest.mark.parametrize(
+    ("args", "error", "text"),
+    [
+        (["--ros-args", "-p", "fs:=0.5"], ParameterError, "parameter 'fs' = 0.5"),
+        (["--ros-args", "-p", "zz:=1"], ParameterError, "unknown parameter 'zz'"),
+        (["--ros-args", "-p", "mode:=c"], ParameterError, "one of ['a', 'b']"),
+        (["--ros-args", "--bogus"], ArgumentError, "--bogus"),
+    ],
+)
+def test_bad_arguments_give_one_clear_error(
+    rclpy_env: None, args: list[str], error: type[Exception], text: str
+) -> None:
+    with pytest.raises(error) as info:
+        Node("gen", PARAMS, args)
+    assert text in str(info.value)
+
+
+def test_bad_environment_is_refused_before_anything_starts(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("RIG_RUNTIME_BACKEND", "zenoh")
+    with pytest.raises(ArgumentError, match="expected 'rclpy' or 'dds'"):
+        Node("gen", PARAMS, [])
+    monkeypatch.setenv("RIG_RUNTIME_BACKEND", "rclpy")
+    monkeypatch.setenv("ROS_DOMAIN_ID", "300")
+    with pytest.raises(ArgumentError, match="ROS_DOMAIN_ID=300 is outside 0..232"):
+        Node("gen", PARAMS, [])
+
+
+def test_logs_reach_rosout(rclpy_env: None) -> None:
+    node = Node("speaker", argv=[])
+    watcher = Node("rosout_watcher", argv=[])
+    got: list[Any] = []
+    try:
+        watcher.create_subscription(
+            "rcl_interfaces/msg/Log", "/rosout", got.append, qos="default", depth=100
+        )
+        # Matched with both nodes' /rosout writers (its own and the speaker's).
+        assert watcher.spin_until(
+            lambda: watcher.readiness_report().endpoints[-1].matched_count >= 2, 10.0
+        )
+        node.logger.warning("pitch %d deg", 7)
+
+        def seen() -> bool:
+            node.spin_once(0.01)
+            return any(m.msg == "pitch 7 deg" for m in got)
+
+        assert watcher.spin_until(seen, 10.0)
+        (entry,) = [m for m in got if m.msg == "pitch 7 deg"]
+        assert entry.name == "speaker" and entry.level == logging.WARNING
+    finally:
+        node.close()
+        watcher.close()
+
+
+def test_rclpy_requested_but_missing_names_the_install_command(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from rig_runtime import ros_environment
+
+    monkeypatch.setattr(ros_environment, "rclpy_available", lambda: False)
+    monkeypatch.setenv("RIG_RUNTIME_BACKEND", "rclpy")
+    with pytest.raises(ArgumentError, match=r"pip install \"ros-jazzy-rclpy\[fastrtps\]\""):
+        ros_environment.check(dict(os.environ))
+    monkeypatch.delenv("RIG_RUNTIME_BACKEND")
+    assert ros_environment.backend_name(dict(os.environ)) == "dds"

@@ -145,7 +145,7 @@ class DiscoveryWatcher:
 
 @pytest.fixture
 def dds_graph(monkeypatch: pytest.MonkeyPatch) -> Iterator[dict[str, str]]:
-    env = graph_env()
+    env = graph_env(RIG_RUNTIME_BACKEND="dds")  # what the DDS backend announces
     join_graph(env, monkeypatch.setenv)
     yield env
 
@@ -229,7 +229,7 @@ def test_bytes_equal_rosbags_and_node_leaves_at_close(dds_graph: dict[str, str])
 def test_independent_reader_sees_each_node_of_a_graph(tmp_path: Path) -> None:
     """Three node processes (one namespaced): each announces its node with the GIDs of exactly
     its readers and writers, the project's own /graph/ready and /experiment/anomaly included."""
-    env = graph_env()
+    env = graph_env(RIG_RUNTIME_BACKEND="dds")  # what the DDS backend announces
     watcher = DiscoveryWatcher(int(env["ROS_DOMAIN_ID"]), create_domain=True)
     try:
         with Processes(env, log_dir=tmp_path) as procs:
@@ -286,7 +286,7 @@ def test_sim_graph_nodes_are_announced(tmp_path: Path) -> None:
     what `ros2 node list` and `ros2 topic info -v /pitch/command` show on a ROS 2 machine."""
     pytest.importorskip("aero_rig")
     graph = load_graph(package_share("aero_rig") / "config" / "sim.yaml")
-    env = graph_env()
+    env = graph_env(RIG_RUNTIME_BACKEND="dds")  # what the DDS backend announces
     overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": "short", "start_timeout_s": 120.0},
         "identifier": {"output_dir": str(tmp_path / "run")},

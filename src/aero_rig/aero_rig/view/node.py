@@ -1,7 +1,5 @@
 """The ``view`` node: subscribes the rig topics and logs them through ``RigViewLogger``."""
 
-import os
-import sys
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
@@ -15,7 +13,6 @@ from rig_runtime.interface import (
     PRESSURE_TAPS,
     WING_COEFFICIENTS,
 )
-from rig_runtime.node import BACKEND_ENV, EXIT_CONFIG_ERROR
 
 from .logger import RigViewLogger
 from .recording import MODES, TOPICS, close_recording, open_recording
@@ -102,23 +99,7 @@ class View:
 def main(argv: Sequence[str] | None = None) -> int:
     from . import __doc__ as description  # --help shows the package docstring
 
-    # rerun and rclpy's numpy 1.26 extensions cannot share a process (docs/design.md §3).
-    previous = os.environ.get(BACKEND_ENV)
-    if (previous or "").strip().lower() == "rclpy":
-        print(
-            f"[FATAL] [view]: {BACKEND_ENV}=rclpy: the Rerun view runs on the Cyclone DDS "
-            "backend only (rerun needs numpy >= 2)",
-            file=sys.stderr,
-        )
-        return EXIT_CONFIG_ERROR
-    os.environ[BACKEND_ENV] = "dds"
-    try:
-        return run_node(View, "view", PARAMETERS, argv, description=description)
-    finally:
-        if previous is None:
-            os.environ.pop(BACKEND_ENV, None)
-        else:
-            os.environ[BACKEND_ENV] = previous
+    return run_node(View, "view", PARAMETERS, argv, description=description)
 
 
 if __name__ == "__main__":
