@@ -5,6 +5,8 @@
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
+export ROS_WHEELS_EXIST := import platform, sys; sys.exit(0 if platform.system() == "Linux" and platform.machine() == "x86_64" and (3, 10) <= sys.version_info[:2] <= (3, 13) else 1)
+export PLATFORM := import platform, sys; print(platform.machine(), "Python", platform.python_version())
 STAMP  := $(VENV)/.installed
 PACKAGES := rig_runtime multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
 PKG_FILES := $(foreach p,$(PACKAGES),src/$(p)/setup.py src/$(p)/package.xml)
@@ -22,11 +24,33 @@ $(BIN)/python:
 	@test -x $(BIN)/pip || { rm -rf $(VENV); \
 	  echo "error: the venv has no pip (ensurepip missing): sudo apt install python3-venv"; exit 1; }
 
-$(STAMP): $(BIN)/python $(PKG_FILES) requirements-dev.txt constraints.txt
+# rclpy: a sourced ROS 2 Jazzy's if there is one, else the PyPI wheels where they exist
+# (CPython 3.10-3.13 on x86_64 Linux), else none and the Cyclone DDS backend (one line says so).
+$(STAMP): $(BIN)/python $(PKG_FILES) requirements-dev.txt requirements-ros.txt constraints.txt
 	$(BIN)/pip install --quiet --upgrade pip setuptools wheel
 	$(BIN)/pip install --quiet -c constraints.txt -r requirements-dev.txt \
 	  $(foreach p,$(PACKAGES),-e src/$(p))
+	@if [ -n "$$ROS_DISTRO" ] && $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
+	  echo "rclpy: using the sourced ROS 2 $$ROS_DISTRO"; \
+	elif $(BIN)/python -c "$$ROS_WHEELS_EXIST"; then \
+	  $(BIN)/pip install --quiet -c constraints.txt -r requirements-ros.txt && \
+	  echo "rclpy: installed from PyPI (ros-jazzy-rclpy, Fast DDS); the graph runs on rclpy"; \
+	else \
+	  echo "rclpy: no PyPI wheels for this platform ($$($(BIN)/python -c "$$PLATFORM")) and no sourced ROS 2 Jazzy: the graph runs on the Cyclone DDS backend"; \
+	fi
 	@touch $(STAMP)
+
+# The real ros2 tools for the tests (ros2cli, launch_ros, ... from ../shared/ros2-python, with
+# composition_interfaces built for launch_ros). Absent or failing: those tests skip, saying why.
+ROS2_PYTHON ?= ../shared/ros2-python
+ROS2_TOOLS := $(VENV)/.ros2-tools
+$(ROS2_TOOLS): $(STAMP)
+	@if [ -d "$(ROS2_PYTHON)" ] && $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
+	  $(ROS2_PYTHON)/install.sh $(VENV) && \
+	  ($(ROS2_PYTHON)/build_composition_interfaces.sh $(VENV) || \
+	   echo "ros2 launch: composition_interfaces did not build; the launch tests will skip"); \
+	else echo "ros2 tools: $(ROS2_PYTHON) or rclpy missing; the ros2 CLI tests will skip"; fi
+	@touch $(ROS2_TOOLS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -40,7 +64,7 @@ typecheck: $(STAMP)
 	$(BIN)/mypy
 
 # The full suite: lint, types, every test (graph tests and campaigns included).
-test: lint typecheck
+test: lint typecheck $(ROS2_TOOLS)
 	$(BIN)/pytest
 
 # Unit tests only (no node graph, no campaign, no build): under a minute.

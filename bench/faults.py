@@ -44,6 +44,7 @@ from rig_runtime.testing import (
     BusyProcesses,
     finish,
     graph_env,
+    join_graph,
     node_process,
     pause,
     start_session,
@@ -81,8 +82,7 @@ def campaign(
 def recorder_late(run: Path) -> tuple[int, float, str]:
     """The graph without its recorder, which is started 5 s later by hand."""
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        os.environ[key] = env[key]
+    join_graph(env)
     full = load_graph(SIM)
     graph = type(full)(full.name, tuple(n for n in full.nodes if n.name != "recorder"))
     run.mkdir(parents=True)

@@ -116,8 +116,7 @@ def test_a_recorder_started_late_is_waited_for_and_records_everything(
     small_plan: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     env = graph_env()
-    for key in ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "RIG_DDS_NETWORK"):
-        monkeypatch.setenv(key, env[key])
+    join_graph(env, monkeypatch.setenv)
     full = load_graph(SIM_GRAPH)
     members = [n.name for n in full.nodes if n.barrier == "member"]
     graph = type(full)(full.name, tuple(n for n in full.nodes if n.name != "recorder"))

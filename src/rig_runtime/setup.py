@@ -14,7 +14,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
     ],
-    package_data={package_name: ["py.typed"]},
+    package_data={package_name: ["py.typed", "fastdds_profiles.xml"]},
     install_requires=[
         "numpy>=1.26",
         "pyyaml>=6",

@@ -78,8 +78,19 @@ PARAMETERS = [
     Parameter("scan_workers", 1, "scan: local worker processes (0 = every core)", min=0),
     Parameter("scan_scheduler", "", "scan: Dask scheduler address ('' = local processes)"),
     Parameter("use_worker", True, "refit in a worker process (false: inline, for debugging)"),
-    Parameter("exit_after_final", True, "exit once the final identification is published"),
-    Parameter("max_early_samples", 20000, "samples kept while waiting for the plan", min=0),
+    Parameter(
+        "exit_after_final",
+        True,
+        "exit once the final identification is published (live: ros2 param set)",
+        read_only=False,
+    ),
+    Parameter(
+        "max_early_samples",
+        20000,
+        "samples kept while waiting for the plan (live: ros2 param set)",
+        min=0,
+        read_only=False,
+    ),
     Parameter(
         "input_qos",
         "stream",

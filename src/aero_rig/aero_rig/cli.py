@@ -173,7 +173,17 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         f"aero-rig: campaign '{args.plan}' on {backend_label(backend)} -> {run_dir}",
         file=sys.stderr,
     )
-    launcher = Launcher(graph, env=env, overrides=overrides, log_dir=run_dir / "logs")
+    try:
+        launcher = Launcher(
+            graph,
+            env=env,
+            overrides=overrides,
+            log_dir=run_dir / "logs",
+            backends=parse_node_backends(args.node_backend),
+        )
+    except (KeyError, GraphError) as exc:
+        print(f"aero-rig: {exc}", file=sys.stderr)
+        return 2
     monitor = CampaignMonitor()
     started = time.monotonic()
     stopped_by: list[str] = []
@@ -290,7 +300,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         overrides["identifier"] = {"output_dir": str(out)}
         print(f"aero-rig: recording to {out / 'bag'}", file=sys.stderr)
     overrides = _merge(overrides, parse_overrides(args.overrides))
-    return Launcher(graph, overrides=overrides).run(args.duration)
+    try:
+        launcher = Launcher(
+            graph, overrides=overrides, backends=parse_node_backends(args.node_backend)
+        )
+    except (KeyError, GraphError) as exc:
+        print(f"aero-rig: {exc}", file=sys.stderr)
+        return 2
+    return launcher.run(args.duration)
 
 
 def _merge(
@@ -630,6 +647,36 @@ def _add_record_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_backend_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--node-backend",
+        action="append",
+        default=[],
+        metavar="NODE=BACKEND",
+        help="run NODE on rclpy or dds, the others on RIG_RUNTIME_BACKEND's (default: rclpy "
+        "where it imports): a mixed graph, as a lab with ROS PCs and a venv laptop; repeatable",
+    )
+
+
+def parse_node_backends(items: list[str]) -> dict[str, str]:
+    """``["lift=dds", ...]`` -> ``{"lift": "dds"}``; SystemExit(2) on a malformed item."""
+    out = {}
+    for item in items:
+        name, sep, backend = item.partition("=")
+        if not sep or backend not in ("rclpy", "dds") or not name:
+            print(f"aero-rig: --node-backend {item!r}: expected NODE=rclpy|dds", file=sys.stderr)
+            raise SystemExit(2)
+        if backend == "rclpy" and not ros_environment.rclpy_available():
+            print(
+                f"aero-rig: --node-backend {item}: rclpy does not import here; install it with "
+                f"`{ros_environment.INSTALL_RCLPY}`",
+                file=sys.stderr,
+            )
+            raise SystemExit(2)
+        out[name] = backend
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="aero-rig", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -653,6 +700,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="exit 0 even if data were lost or excluded (they are still listed)",
     )
+    _add_backend_option(p)
     _add_override_option(p)
     p.set_defaults(func=cmd_campaign)
 
@@ -662,6 +710,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     p.add_argument("--out", default=None, help="run directory for the bag and the report")
     p.add_argument("--rerun", choices=VIEW_MODES, default="off", help="live Rerun view")
+    _add_backend_option(p)
     _add_override_option(p)
     p.set_defaults(func=cmd_run)
 

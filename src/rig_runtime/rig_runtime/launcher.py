@@ -27,8 +27,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .graph import GraphError, GraphSpec, NodeSpec, entry_point, load_graph
+from .graph import BACKENDS, GraphError, GraphSpec, NodeSpec, entry_point, load_graph
 from .node import LAUNCHER_PID_ENV
+from .ros_environment import BACKEND_ENV
 
 
 @dataclass
@@ -95,8 +96,16 @@ class Launcher:
         overrides: Mapping[str, dict[str, Any]] | None = None,
         log_dir: Path | None = None,
         grace_s: float = 5.0,
+        backends: Mapping[str, str] | None = None,
     ) -> None:
+        """``backends``: {node name: "rclpy" | "dds"} over the graph's own ``backend`` keys
+        (a mixed graph); other nodes run on the environment's backend."""
         self.graph = graph
+        self.backends = dict(backends or {})
+        for name, backend in self.backends.items():
+            graph.node(name)  # KeyError naming the graph if there is no such node
+            if backend not in BACKENDS:
+                raise GraphError(f"backend of {name!r}: {backend!r} is not one of {BACKENDS}")
         # RIG_LAUNCHER_PID: a node whose parent is no longer this process stops (Node.spin), so
         # a launcher killed with SIGKILL leaves no graph running on.
         self.env = {**os.environ, **(env or {}), LAUNCHER_PID_ENV: str(os.getpid())}
@@ -128,9 +137,13 @@ class Launcher:
             # stops the nodes in order instead of all of them racing. The same session, though:
             # with the kernel's autogroup scheduling every session is one scheduling entity,
             # and a node's `nice` would have no effect against nodes in other sessions.
+            env = self.env
+            backend = self.backends.get(spec.name) or spec.backend
+            if backend:  # a mixed graph: this node on its own backend
+                env = {**env, BACKEND_ENV: backend}
             process = subprocess.Popen(
                 cmd,
-                env=self.env,
+                env=env,
                 stdout=stdout,
                 stderr=subprocess.STDOUT,
                 process_group=0,

@@ -28,6 +28,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from .barrier import Endpoint
@@ -38,6 +39,9 @@ from .qos import QosProfile
 from .ros_environment import domain_id
 
 EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
+# Fast DDS reads its default QoS profiles from this file when the first participant is made.
+PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
+PROFILES_FILE = Path(__file__).with_name("fastdds_profiles.xml")
 INSTALL_HINT = 'pip install "ros-jazzy-rclpy[fastrtps]" ros-jazzy-common-interfaces'
 # Parameters rclpy declares on every node itself.
 RCLPY_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
@@ -202,6 +206,8 @@ class RclpyBackend:
         from rclpy.signals import SignalHandlerOptions
 
         cli_args = list(argv)
+        # Writers block up to 60 s for a slow reader, as on the DDS backend (the XML says why).
+        os.environ.setdefault(PROFILES_ENV, str(PROFILES_FILE))
         # A context per node: its own participant in the domain of this moment (tests move
         # between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself
         # (an orderly stop that lets the recorder drain), so rclpy installs no handler.

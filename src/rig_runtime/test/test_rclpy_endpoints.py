@@ -2,6 +2,7 @@
 start barrier, its parameters (declared with descriptors, checked like the DDS backend's), its
 logs on /rosout, and the same message objects as the DDS backend."""
 
+import dataclasses
 import logging
 import os
 from collections.abc import Iterator
@@ -10,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from rig_runtime.barrier import ReadinessReport, StartBarrier
+from rig_runtime.barrier import StartBarrier
 from rig_runtime.interface import PITCH_COMMAND
 from rig_runtime.names import ArgumentError
 from rig_runtime.node import Node
@@ -40,23 +41,28 @@ def test_counts_not_gids_and_the_barrier_decides_on_them(rclpy_env: None) -> Non
     try:
         assert gen.backend_name == act.backend_name == "rclpy"
         pub = gen.create_publisher(PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos)
-        barrier = StartBarrier(["sim_actuator"])
-        report = gen.readiness_report()
-        assert report.endpoints[0].matched is None and report.endpoints[0].matched_count == 0
         act.create_subscription(
             PITCH_COMMAND.type, PITCH_COMMAND.name, lambda m: None, PITCH_COMMAND.qos
         )
-        barrier.update(act.readiness_report())
-        pending = barrier.pending(gen.readiness_report())
-        assert pending and all("of /pitch/command has matched 0 of 1" in p for p in pending)
         assert gen.spin_until(lambda: pub.subscription_count() == 1, 10.0)
-        assert act.spin_until(
-            lambda: act.readiness_report().endpoints[0].matched_count == 1, 10.0
-        )
+        assert act.spin_until(lambda: act.readiness_report().endpoints[-1].matched_count == 1, 10.0)
+        report = gen.readiness_report()
+        (writer,) = [e for e in report.endpoints if e.topic == PITCH_COMMAND.name]
+        assert writer.matched is None and writer.matched_count == 1 and writer.kind == "writer"
+        (reader,) = act.readiness_report().endpoints[-1:]
+        assert reader.topic == PITCH_COMMAND.name and reader.reliable
+        assert not reader.transient_local
+        barrier = StartBarrier(["sim_actuator"])
         barrier.update(act.readiness_report())
-        endpoints = act.readiness_report().endpoints
-        assert endpoints[0].topic == PITCH_COMMAND.name and endpoints[0].reliable
-        assert barrier.pending(gen.readiness_report()) == []
+        assert barrier.pending(report) == []
+        # The same writer before it matched: the barrier holds the start on the count.
+        unmatched = dataclasses.replace(writer, matched_count=0)
+        early = dataclasses.replace(
+            report, endpoints=tuple(unmatched if e is writer else e for e in report.endpoints)
+        )
+        assert barrier.pending(early) == [
+            "/generator: its writer of /pitch/command has matched 0 of 1 member endpoints"
+        ]
     finally:
         gen.close()
         act.close()
@@ -105,15 +111,15 @@ def test_parameters_come_from_rcl_and_keep_the_runtime_s_checks(rclpy_env: None)
         assert not rnode.describe_parameter("gain").read_only
         assert rnode.get_parameter("count").value == 3
         # A live change takes effect; a read-only or out-of-range one is refused with a reason.
-        from rclpy.parameter import Parameter as P
+        from rclpy.parameter import Parameter as RosParameter
 
-        (ok,) = rnode.set_parameters([P("gain", P.Type.DOUBLE, 1.5)])
+        (ok,) = rnode.set_parameters([RosParameter("gain", RosParameter.Type.DOUBLE, 1.5)])
         assert ok.successful and node.params["gain"] == 1.5
-        (refused,) = rnode.set_parameters([P("fs", P.Type.DOUBLE, 50.0)])
+        (refused,) = rnode.set_parameters([RosParameter("fs", RosParameter.Type.DOUBLE, 50.0)])
         assert not refused.successful and "read-only" in refused.reason
-        (refused,) = rnode.set_parameters([P("gain", P.Type.DOUBLE, 3.0)])
+        (refused,) = rnode.set_parameters([RosParameter("gain", RosParameter.Type.DOUBLE, 3.0)])
         assert not refused.successful and node.params["gain"] == 1.5
-        (refused,) = rnode.set_parameters([P("mode", P.Type.STRING, "c")])
+        (refused,) = rnode.set_parameters([RosParameter("mode", RosParameter.Type.STRING, "c")])
         assert not refused.successful and "one of ['a', 'b']" in refused.reason
         assert node.params["mode"] == "a"
     finally:
@@ -145,7 +151,7 @@ def test_bad_environment_is_refused_before_anything_starts(
         Node("gen", PARAMS, [])
     monkeypatch.setenv("RIG_RUNTIME_BACKEND", "rclpy")
     monkeypatch.setenv("ROS_DOMAIN_ID", "300")
-    with pytest.raises(ArgumentError, match="ROS_DOMAIN_ID=300 is outside 0..232"):
+    with pytest.raises(ArgumentError, match=r"ROS_DOMAIN_ID=300 is outside 0\.\.232"):
         Node("gen", PARAMS, [])
 
 

@@ -1,0 +1,178 @@
+"""The simulated graph seen with the real ``ros2`` command (ros2cli, Jazzy), on both backends.
+
+The tools come from ``../shared/ros2-python`` (``make test`` installs them into the venv);
+without them these tests skip with one line. The graph is `aero-rig run sim`'s, in real time
+(``real_time_factor`` 1), on this machine only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, as
+every test); the ros2 commands run on rclpy with Fast DDS, so against the DDS backend this is
+also a Cyclone DDS / Fast DDS interoperability check.
+"""
+
+import re
+import select
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from rig_runtime.graph import load_graph, package_share
+from rig_runtime.interface import PITCH_COMMAND
+from rig_runtime.launcher import Launcher
+from rig_runtime.testing import graph_env
+
+ROS2 = Path(sys.executable).parent / "ros2"
+NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]
+pytestmark = pytest.mark.skipif(
+    not ROS2.exists(),
+    reason="the ros2 tools are not in the venv (make test installs them from "
+    "../shared/ros2-python; absent here)",
+)
+
+
+def _backends() -> list[str]:
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return ["dds"]
+    return ["rclpy", "dds"]
+
+
+class RunningGraph:
+    def __init__(self, env: dict[str, str], launcher: Launcher) -> None:
+        self.env = env
+        self.launcher = launcher
+
+    def ros2(self, *args: str, timeout: float = 60.0) -> str:
+        """Run ``ros2 ARGS``; its output (stdout), or an assertion error with stderr."""
+        proc = subprocess.run(
+            [str(ROS2), *args], env=self.env, capture_output=True, text=True, timeout=timeout
+        )
+        assert proc.returncode == 0, (args, proc.returncode, proc.stdout, proc.stderr[-2000:])
+        return proc.stdout
+
+
+@pytest.fixture(scope="module", params=_backends())
+def graph(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[RunningGraph]:
+    tmp = tmp_path_factory.mktemp(f"ros2cli_{request.param}")
+    env = graph_env(RIG_RUNTIME_BACKEND=request.param)
+    sim = load_graph(package_share("aero_rig") / "config" / "sim.yaml")
+    overrides = {
+        "generator": {"plan": "default", "real_time_factor": 1.0, "start_timeout_s": 120.0},
+        "identifier": {"output_dir": str(tmp / "run"), "use_worker": False, "scan": False},
+        "recorder": {"output": str(tmp / "run" / "bag")},
+    }
+    launcher = Launcher(sim, env=env, overrides=overrides, log_dir=tmp / "logs")
+    launcher.start()
+    try:
+        running = RunningGraph(env, launcher)
+        deadline = time.monotonic() + 90.0
+        listed: list[str] = []
+        while time.monotonic() < deadline and listed != NODES:
+            assert launcher.poll() is None, launcher.failure
+            listed = sorted(running.ros2("node", "list", "--no-daemon").split())
+        assert listed == NODES, listed
+        yield running
+    finally:
+        launcher.stop()
+
+
+def test_node_list_shows_the_six_nodes_every_time(graph: RunningGraph) -> None:
+    """With the default spin time, ten times in a row."""
+    for _ in range(10):
+        assert sorted(graph.ros2("node", "list", "--no-daemon").split()) == NODES
+
+
+def test_node_info_shows_the_generator_s_endpoints(graph: RunningGraph) -> None:
+    info = graph.ros2("node", "info", "/generator", "--no-daemon")
+    publishers = info.split("Publishers:")[1].split("Service Servers:")[0]
+    subscribers = info.split("Subscribers:")[1].split("Publishers:")[0]
+    for topic in ("/pitch/command", "/experiment/plan", "/experiment/segment", "/graph/ready"):
+        assert f"{topic}:" in publishers, info
+    assert "/wing/coefficients:" in subscribers and "/graph/ready:" in subscribers, info
+
+
+def test_topic_list_with_types(graph: RunningGraph) -> None:
+    listed = graph.ros2("topic", "list", "-t", "--no-daemon")
+    assert "/pitch/command [sensor_msgs/msg/JointState]" in listed
+    assert "/pressure/taps [sensor_msgs/msg/PointCloud2]" in listed
+    assert "/wing/coefficients [geometry_msgs/msg/Vector3Stamped]" in listed
+
+
+def test_topic_info_qos_is_the_interface_s(graph: RunningGraph) -> None:
+    info = graph.ros2("topic", "info", "-v", PITCH_COMMAND.name, "--no-daemon")
+    blocks = info.split("Node name: ")[1:]
+    by_node = {b.split("\n", 1)[0].strip(): b for b in blocks}
+    assert "PUBLISHER" in by_node["generator"] and "SUBSCRIPTION" in by_node["sim_actuator"]
+    qos = PITCH_COMMAND.qos
+    reliability = "RELIABLE" if qos.reliability == "reliable" else "BEST_EFFORT"
+    durability = "TRANSIENT_LOCAL" if qos.durability == "transient_local" else "VOLATILE"
+    for block in by_node.values():
+        assert f"Reliability: {reliability}" in block, block
+        assert f"Durability: {durability}" in block, block
+
+
+def test_topic_hz_of_the_taps_is_200_hz(graph: RunningGraph) -> None:
+    proc = subprocess.Popen(
+        [str(ROS2), "topic", "hz", "/pressure/taps", "--window", "400"],
+        env=graph.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    lines: list[str] = []
+    rates: list[float] = []
+    deadline = time.monotonic() + 60.0
+    try:
+        assert proc.stdout is not None
+        # ros2 topic hz reports once a second; the sixth report averages over 5 s or more.
+        while len(rates) < 6 and time.monotonic() < deadline:
+            ready, _, _ = select.select([proc.stdout], [], [], 1.0)
+            if not ready:
+                continue
+            line = proc.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            rates += [float(r) for r in re.findall(r"average rate: ([0-9.]+)", line)]
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)
+    assert len(rates) >= 6, "".join(lines)
+    assert 190.0 <= rates[-1] <= 210.0, "".join(lines)
+
+
+def test_topic_echo_once(graph: RunningGraph) -> None:
+    out = graph.ros2("topic", "echo", "--once", "/wing/coefficients", "--no-daemon")
+    assert "header:" in out and re.search(r"x: -?[0-9.e-]+", out), out
+
+
+def test_param_list_get_describe_set(graph: RunningGraph) -> None:
+    if graph.env["RIG_RUNTIME_BACKEND"] != "rclpy":
+        pytest.skip("parameter services are rclpy's (the DDS backend has none)")
+    listed = graph.ros2("param", "list", "/generator", "--no-daemon")
+    for name in ("plan", "real_time_factor", "max_deg", "barrier_nodes"):
+        assert f"  {name}\n" in listed, listed
+    assert "Double value is: 1.0" in graph.ros2(
+        "param", "get", "/generator", "real_time_factor", "--no-daemon"
+    )
+    described = graph.ros2("param", "describe", "/generator", "real_time_factor", "--no-daemon")
+    assert "Read only: true" in described.replace("Read only: True", "Read only: true")
+    assert "Min value: 0.0" in described and "Max value: 1000.0" in described, described
+    dumped = graph.ros2("param", "dump", "/lift", "--no-daemon")
+    assert "ros__parameters:" in dumped
+    refused = graph.ros2("param", "set", "/generator", "seed", "3", "--no-daemon")
+    assert "Setting parameter failed" in refused and "read-only" in refused, refused
+    out_of_range = graph.ros2(
+        "param", "set", "/identifier", "max_early_samples", "-5", "--no-daemon"
+    )
+    assert "Setting parameter failed" in out_of_range, out_of_range
+    done = graph.ros2("param", "set", "/identifier", "max_early_samples", "30000", "--no-daemon")
+    assert "Set parameter successful" in done, done
+    assert "Integer value is: 30000" in graph.ros2(
+        "param", "get", "/identifier", "max_early_samples", "--no-daemon"
+    )
