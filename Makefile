@@ -63,9 +63,14 @@ format: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-# The full suite: lint, types, every test (graph tests and campaigns included).
+# The full suite: lint, types, every test (graph tests and campaigns included) on the default
+# backend (rclpy where it imports), then the graph suite (-m slow) again on the DDS backend.
 test: lint typecheck $(ROS2_TOOLS)
 	$(BIN)/pytest
+	@if $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
+	  echo "== the graph suite again, on the Cyclone DDS backend"; \
+	  RIG_RUNTIME_BACKEND=dds $(BIN)/pytest -m slow; \
+	fi
 
 # Unit tests only (no node graph, no campaign, no build): under a minute.
 test-fast: $(STAMP)

@@ -254,6 +254,37 @@ def test_starved_campaign_is_lossless_and_gives_the_same_table(campaign, starved
     _assert_lossless_and_identical(run, campaign[0])
 
 
+# A mixed graph (docs/design.md §3.1): the plant and the generator on the other backend than the
+# rest, as a lab whose rig PC runs a ROS 2 install and whose laptop runs the venv.
+OTHER_BACKEND = {"rclpy": "dds", "dds": "rclpy"}
+MIXED_NODES = ("generator", "sim_actuator", "sim_wing")
+
+
+def test_mixed_graph_gives_the_same_tables(campaign, tmp_path: Path) -> None:
+    """Half the nodes on rclpy (Fast DDS), half on the Cyclone DDS backend: lossless, and the
+    tables and the data-quality account byte-identical to the one-backend campaign."""
+    env = graph_env()
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        pytest.skip("rclpy is not installed: no second backend to mix with")
+    other = OTHER_BACKEND[env["RIG_RUNTIME_BACKEND"]]
+    run = tmp_path / "run"
+    mixed = [f"--node-backend={name}={other}" for name in MIXED_NODES]
+    proc = _aero_rig(
+        *("campaign", "--plan", "short", *WING, "--out", str(run), "--quiet", *mixed),
+        *TIMEOUT_600,
+        env=env,
+        timeout=700,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    _assert_lossless_and_identical(run, campaign[0])
+    for name in ("data_quality.md", "clustering.md"):
+        assert (run / name).read_bytes() == (campaign[0] / name).read_bytes(), name
+    for name in MIXED_NODES:  # each node ran where it was told
+        assert f"on {other}" in (run / "logs" / f"{name}.log").read_text(), name
+
+
 @pytest.mark.timeout(900)
 def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
     """SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run: the credit stalls the

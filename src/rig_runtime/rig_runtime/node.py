@@ -175,6 +175,15 @@ class Node:
     def backend_name(self) -> str:
         return self._backend.name
 
+    @property
+    def backend_description(self) -> str:
+        """``rclpy (rmw_fastrtps_cpp)`` or ``dds (Cyclone DDS backend)``, for the log."""
+        if self._backend.name == "rclpy":
+            from rclpy.utilities import get_rmw_implementation_identifier
+
+            return f"rclpy ({get_rmw_implementation_identifier()})"
+        return "dds (Cyclone DDS backend)"
+
     def resolve_topic(self, topic: str) -> str:
         """The fully qualified topic name after expansion and remapping (rcl's on rclpy)."""
         resolve = getattr(self._backend, "resolve_topic", None)
@@ -440,6 +449,7 @@ def run_node(
         if callable(close):
             node.on_shutdown(close)
         node.start_readiness()
+        node.logger.info("running on %s", node.backend_description)
         profile_dir = os.environ.get("RIG_PROFILE_DIR")
         if profile_dir:  # cProfile of the spin loop, for `python -m pstats DIR/<node>.prof`
             import cProfile
