@@ -15,6 +15,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -54,7 +55,7 @@ def graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningGraph]:
     env = graph_env()
     tmp = tmp_path_factory.mktemp(f"ros2cli_{env['RIG_RUNTIME_BACKEND']}")
     sim = load_graph(package_share("aero_rig") / "config" / "sim.yaml")
-    overrides = {
+    overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": "default", "real_time_factor": 1.0, "start_timeout_s": 120.0},
         "identifier": {"output_dir": str(tmp / "run"), "use_worker": False, "scan": False},
         "recorder": {"output": str(tmp / "run" / "bag")},

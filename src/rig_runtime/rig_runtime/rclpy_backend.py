@@ -103,6 +103,20 @@ class RclpySubscription:
         return int(self.subscription.get_publisher_count())
 
 
+def _endpoint(
+    entity: RclpyPublisher | RclpySubscription, kind: str, gid: str, matched_count: int
+) -> Endpoint:
+    return Endpoint(
+        topic=entity.topic,
+        kind=kind,
+        gid=gid,
+        reliable=entity.profile.reliability == "reliable",
+        transient_local=entity.profile.durability == "transient_local",
+        matched=None,
+        matched_count=matched_count,
+    )
+
+
 def _descriptor(p: Parameter) -> Any:
     """An rcl_interfaces ParameterDescriptor from a declaration (type, description, range)."""
     from rcl_interfaces.msg import (
@@ -409,26 +423,15 @@ class RclpyBackend:
         """Readers and writers with matched counts: rclpy does not name the matched endpoints
         (their GIDs), so the start barrier compares counts (barrier.py)."""
         fq = self.node.get_fully_qualified_name()
-        out = []
-        for kind, entities in (("writer", self._publishers), ("reader", self._subscriptions)):
-            for i, entity in enumerate(entities):
-                count = (
-                    entity.subscription_count()
-                    if isinstance(entity, RclpyPublisher)
-                    else entity.publisher_count()
-                )
-                out.append(
-                    Endpoint(
-                        topic=entity.topic,
-                        kind=kind,
-                        gid=f"{fq}#{kind}{i}",
-                        reliable=entity.profile.reliability == "reliable",
-                        transient_local=entity.profile.durability == "transient_local",
-                        matched=None,
-                        matched_count=count,
-                    )
-                )
-        return out
+        writers = [
+            _endpoint(p, "writer", f"{fq}#writer{i}", p.subscription_count())
+            for i, p in enumerate(self._publishers)
+        ]
+        readers = [
+            _endpoint(s, "reader", f"{fq}#reader{i}", s.publisher_count())
+            for i, s in enumerate(self._subscriptions)
+        ]
+        return writers + readers
 
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
         """Topics with their type and the QoS offered by their first publisher."""
