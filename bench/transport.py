@@ -1,4 +1,9 @@
-"""Transport benchmark: two processes on the Cyclone DDS backend, 49-tap PointCloud2 messages.
+"""Transport benchmark: two processes on each backend, 49-tap PointCloud2 messages.
+
+Each configuration runs the same two phases: the Cyclone DDS backend (``dds``), rclpy with the
+runtime's EventsExecutor (``rclpy_events``, the default) and rclpy with its
+SingleThreadedExecutor (``rclpy_single``); rclpy configurations are skipped where rclpy does
+not import.
 
 Round trip: this process publishes a tap cloud at 200 Hz on /bench/ping; an echo process
 republishes it on /bench/pong; the round-trip time is measured per message.
@@ -6,13 +11,15 @@ Throughput: this process publishes ``--flood`` messages as fast as the reliable 
 takes on /bench/flood (QoS "stream": reliable, keep-all, back-pressure); the echo process counts
 them and reports the count and its first/last receive times (one-way sustained rate).
 
-    .venv/bin/python bench/transport.py [--seconds 10] [--flood 20000]
+    .venv/bin/python bench/transport.py [--seconds 10] [--flood 20000] [--configs dds,...]
 
-Last line: JSON with sent, received, lost, throughput_msg_s, rtt_p50_ms, rtt_p99_ms.
+Last line: JSON {configuration: {sent, received, lost, throughput_msg_s, rtt_p50_ms,
+rtt_p99_ms, ...}}.
 """
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -22,6 +29,7 @@ import numpy as np
 
 from rig_runtime.demo_nodes import make_message
 from rig_runtime.node import Node
+from rig_runtime.ros_environment import rclpy_available
 from rig_runtime.testing import graph_env, join_graph, unique_domain_id
 
 CLOUD = "sensor_msgs/msg/PointCloud2"
@@ -58,17 +66,42 @@ def echo_main() -> int:
     return 0
 
 
+CONFIGS = {
+    "dds": {"RIG_RUNTIME_BACKEND": "dds"},
+    "rclpy_events": {"RIG_RUNTIME_BACKEND": "rclpy", "RIG_RCLPY_EXECUTOR": "events"},
+    "rclpy_single": {"RIG_RUNTIME_BACKEND": "rclpy", "RIG_RCLPY_EXECUTOR": "single"},
+}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="round-trip phase length")
     parser.add_argument("--flood", type=int, default=20000, help="messages in throughput phase")
+    parser.add_argument(
+        "--configs", default=",".join(CONFIGS), help=f"comma-separated, of {list(CONFIGS)}"
+    )
     parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
         return echo_main()
+    results: dict[str, dict[str, Any]] = {}
+    ok = True
+    for name in args.configs.split(","):
+        if name.startswith("rclpy") and not rclpy_available():
+            print(f"== {name}: skipped (rclpy does not import)")
+            continue
+        print(f"== {name}")
+        figures = measure(args, CONFIGS[name])
+        ok = ok and figures["lost"] == 0
+        results[name] = figures
+    print(json.dumps(results))
+    return 0 if ok else 1
 
-    env = graph_env(unique_domain_id())
+
+def measure(args: argparse.Namespace, config: dict[str, str]) -> dict[str, Any]:
+    env = graph_env(unique_domain_id(), **config)
     join_graph(env)
+    os.environ.update(config)
     echo = subprocess.Popen([sys.executable, __file__, "--echo"], env=env)
     try:
         node = Node("bench_ping", argv=[])
@@ -154,8 +187,7 @@ def main() -> int:
         f"reliable throughput: {received}/{args.flood} received, "
         f"{figures['throughput_msg_s']} msg/s sustained"
     )
-    print(json.dumps(figures))
-    return 0 if received == args.flood else 1
+    return figures
 
 
 if __name__ == "__main__":

@@ -181,28 +181,31 @@ def _link_problems(reports: Iterable[ReadinessReport]) -> list[str]:
                 if not compatible(w, r):
                     continue
                 for side, other in ((w, r), (r, w)):
-                    if side.matched is not None and other.gid not in side.matched:
+                    # By GID where both ends are named (the DDS backend names its endpoints
+                    # and what they matched; rclpy does neither: counted below).
+                    named = side.matched is not None and other.matched is not None
+                    if named and other.gid not in (side.matched or ()):
                         problems.append(
                             f"{owner[side.gid]}: its {side.kind} of {topic} has not matched "
                             f"{owner[other.gid]}'s {other.kind} yet"
                         )
-        # Counts where a backend cannot name the matched endpoints (rclpy).
+        # Counts where either end cannot be named (rclpy, or a mixed graph).
         for side_list, other_list in (
             (writers.get(topic, []), readers.get(topic, [])),
             (readers.get(topic, []), writers.get(topic, [])),
         ):
             for e in side_list:
-                if e.matched is not None:
-                    continue
-                expected = sum(
-                    1
+                others = [
+                    o
                     for o in other_list
                     if (compatible(e, o) if e.kind == "writer" else compatible(o, e))
-                )
-                if e.matched_count < expected:
+                ]
+                if e.matched is not None and all(o.matched is not None for o in others):
+                    continue  # every pair checked by GID above
+                if e.matched_count < len(others):
                     problems.append(
                         f"{owner[e.gid]}: its {e.kind} of {topic} has matched "
-                        f"{e.matched_count} of {expected} member endpoints"
+                        f"{e.matched_count} of {len(others)} member endpoints"
                     )
     for report in reports:
         own_readers = {e.topic: e for e in report.endpoints if e.kind == "reader"}

@@ -171,3 +171,27 @@ def test_report_json_round_trip() -> None:
         assert ReadinessReport.from_json(report.to_json()) == report
     with pytest.raises(ValueError):
         ReadinessReport.from_json('{"no": "node"}')
+
+
+def test_mixed_graph_counts_where_an_end_is_not_named() -> None:
+    """A DDS-backend generator (named GIDs) and an rclpy recorder (counts only): the generator's
+    writer is checked by GID against the DDS actuator and by count for the recorder."""
+    gen_matched = ReadinessReport("/generator", True, endpoints=(_w("/cmd", "G1", None, count=2),))
+    act = ReadinessReport("/actuator", True, endpoints=(_r("/cmd", "A1", ("G1",)),))
+    rec = ReadinessReport("/recorder", True, endpoints=(_r("/cmd", "rec#reader0", None, count=1),))
+    barrier = StartBarrier(["actuator", "recorder"])
+    barrier.update(act)
+    barrier.update(rec)
+    assert barrier.pending(gen_matched) == []
+    # Named: the writer has matched the actuator's reader but not yet the recorder's.
+    gen_named = ReadinessReport("/generator", True, endpoints=(_w("/cmd", "G1", ("A1",)),))
+    assert barrier.pending(gen_named) == [
+        "/generator: its writer of /cmd has matched 1 of 2 member endpoints"
+    ]
+    rec_waiting = ReadinessReport(
+        "/recorder", True, endpoints=(_r("/cmd", "rec#reader0", None, count=0),)
+    )
+    barrier.update(rec_waiting)
+    assert barrier.pending(gen_matched) == [
+        "/recorder: its reader of /cmd has matched 0 of 1 member endpoints"
+    ]

@@ -1,0 +1,134 @@
+"""``ros2 launch aero_rig sim.launch.py`` (the real launch, launch_ros and ros2launch, Jazzy)
+runs a short campaign from the packages as colcon installs them.
+
+Needs the ros2 tools and composition_interfaces in the venv (``make test`` installs them from
+../shared/ros2-python); skips with one line otherwise. The nodes are the colcon install's
+executables (``lib/<package>/<executable>``), found through the ament index, as on a ROS
+machine after ``source install/setup.bash``.
+"""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from rig_runtime.graph import package_share
+from rig_runtime.testing import graph_env
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+
+def _launch_ready() -> str | None:
+    if not (BIN / "ros2").exists():
+        return "the ros2 tools are not in the venv (make test installs them)"
+    probe = subprocess.run(
+        [sys.executable, "-c", "import launch_ros, composition_interfaces.srv, ros2launch"],
+        capture_output=True,
+        text=True,
+    )
+    if probe.returncode != 0:
+        return f"launch_ros does not import: {probe.stderr.strip().splitlines()[-1:]}"
+    return None
+
+
+pytestmark = pytest.mark.skipif(_launch_ready() is not None, reason=str(_launch_ready()))
+
+
+@pytest.fixture(scope="module")
+def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``colcon build`` of the workspace into a temporary install (as a ROS user builds it)."""
+    tmp = tmp_path_factory.mktemp("colcon")
+    colcon = shutil.which("colcon", path=str(BIN))
+    assert colcon is not None, "colcon is not installed in the venv"
+    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}")
+    build = subprocess.run(
+        [
+            colcon,
+            "--log-base",
+            str(tmp / "log"),
+            "build",
+            "--base-paths",
+            str(ROOT / "src"),
+            "--build-base",
+            str(tmp / "build"),
+            "--install-base",
+            str(tmp / "install"),
+        ],
+        cwd=tmp,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
+    return tmp / "install"
+
+
+def _sourced(install: Path, env: dict[str, str]) -> dict[str, str]:
+    """What ``source install/setup.bash`` sets for these packages: the ament index prefixes."""
+    prefixes = [str(p) for p in sorted(install.iterdir()) if (p / "share").is_dir()]
+    old = env.get("AMENT_PREFIX_PATH", "")
+    return {
+        **env,
+        "AMENT_PREFIX_PATH": ":".join([*prefixes, *([old] if old else [])]),
+        "PATH": f"{BIN}:{env['PATH']}",
+    }
+
+
+def test_sim_launch_runs_a_short_campaign(colcon_install: Path, tmp_path: Path) -> None:
+    sim = yaml.safe_load((package_share("aero_rig") / "config" / "sim.yaml").read_text())
+    overrides = {
+        "generator": {"plan": "short", "real_time_factor": 0.0, "start_timeout_s": 120.0},
+        "sim_wing": {"preset": "repeatable_stall"},
+        "identifier": {"exit_after_final": True},
+    }
+    for node in sim["nodes"]:
+        node["parameter_overrides"] = {
+            **(node.get("parameter_overrides") or {}),
+            **overrides.get(node["name"], {}),
+        }
+    graph = tmp_path / "short_sim.yaml"
+    graph.write_text(yaml.safe_dump(sim))
+    run_dir = tmp_path / "run"
+    env = _sourced(colcon_install, graph_env())
+    proc = subprocess.Popen(
+        [
+            str(BIN / "ros2"),
+            "launch",
+            "aero_rig",
+            "sim.launch.py",
+            f"graph:={graph}",
+            f"run_dir:={run_dir}",
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        out, _ = proc.communicate(timeout=400)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+        pytest.fail(f"ros2 launch did not finish within 400 s:\n{out[-4000:]}")
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    assert "node 'identifier' finished (stops_graph)" in out, out[-4000:]
+    # Every node of the graph ran under launch, on the run's backend.
+    for name in ("generator", "sim_actuator", "sim_wing", "lift", "identifier", "recorder"):
+        assert f"[{name}-1]" in out, name
+    assert f"running on {env['RIG_RUNTIME_BACKEND']}" in out
+    models = json.loads((run_dir / "models.json").read_text())
+    assert models["data_quality"]["clean"], models["data_quality"]
+    assert (run_dir / "table1_all_levels.md").exists()
+    assert (run_dir / "bag" / "metadata.yaml").exists()
