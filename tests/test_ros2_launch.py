@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -84,7 +85,7 @@ def _sourced(install: Path, env: dict[str, str]) -> dict[str, str]:
 
 def test_sim_launch_runs_a_short_campaign(colcon_install: Path, tmp_path: Path) -> None:
     sim = yaml.safe_load((package_share("aero_rig") / "config" / "sim.yaml").read_text())
-    overrides = {
+    overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": "short", "real_time_factor": 0.0, "start_timeout_s": 120.0},
         "sim_wing": {"preset": "repeatable_stall"},
         "identifier": {"exit_after_final": True},

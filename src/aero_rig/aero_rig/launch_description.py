@@ -48,9 +48,9 @@ IDENTIFIER = ("aero_identification", "identifier")
 # (package, executable) that must not run under ROS launch, and why.
 VENV_ONLY = {
     ("aero_rig", "view"): (
-        "the Rerun view needs numpy >= 2 and must never run in an rclpy process "
-        "(docs/design.md §3); start it from the project's virtual environment with "
-        "`RIG_DDS_NETWORK=lan aero-rig view live`"
+        "the Rerun view needs numpy >= 2, which a ROS 2 Jazzy install from Ubuntu's "
+        "packages does not have (docs/design.md §3.9); start it from the project's virtual "
+        "environment with `ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET aero-rig view live`"
     ),
 }
 
