@@ -8,8 +8,8 @@ machine after ``source install/setup.bash``.
 """
 
 import json
-import re
 import os
+import re
 import shutil
 import signal
 import subprocess
