@@ -5,7 +5,8 @@ from typing import Any
 
 import numpy as np
 
-from rig_runtime.interface import DIAGNOSTICS
+from rig_runtime.barrier import ReadinessReport
+from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import Node, Subscription
 
@@ -72,3 +73,30 @@ def wait_diagnostics(
     ok = node.spin_until(lambda: bool(entries) and predicate(values(entries[-1])), timeout_s)
     assert ok, f"diagnostics never satisfied the check; last: {entries[-1:]}"
     return entries[-1]
+
+
+class PeerReaders:
+    """The readers of the nodes under test, from their readiness reports on /graph/ready (what
+    the start barrier reads): a test that publishes to a node waits until that node's reader
+    has matched the test's writer, not only the other way round. Fast DDS drops what a
+    reliable, volatile writer sends before the reader side has matched it."""
+
+    def __init__(self, node: Node) -> None:
+        self.reports: dict[str, ReadinessReport] = {}
+        node.create_subscription(GRAPH_READY.type, GRAPH_READY.name, self._on_report, "latched")
+
+    def _on_report(self, msg: Any) -> None:
+        report = ReadinessReport.from_json(msg.data)
+        self.reports[report.node] = report
+
+    def matched(self, topics: list[str]) -> bool:
+        """Every topic has a reader in some node's report, and every such reader is matched."""
+        readers = [
+            e
+            for r in self.reports.values()
+            for e in r.endpoints
+            if e.kind == "reader" and e.topic in topics
+        ]
+        return {e.topic for e in readers} >= set(topics) and all(
+            e.matched_count > 0 for e in readers
+        )

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from graph_support import subscribe_diagnostics, wait_diagnostics
+from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 
 from rig_runtime.interface import (
     ALPHA_TRUE_JOINT,
@@ -53,6 +53,7 @@ class ActuatorClient:
         self.stop_pub = self.node.create_publisher(PITCH_STOP.type, PITCH_STOP.name)
         self.states: list[tuple[int, float, float]] = []  # stamp, pitch [deg], alpha_true [deg]
         self.diagnostics: list[dict[str, str]] = []
+        self.peers = PeerReaders(self.node)
         self.subs = [
             self.node.create_subscription(
                 PITCH_STATE.type, PITCH_STATE.name, self._on_state, PITCH_STATE.qos
@@ -75,6 +76,7 @@ class ActuatorClient:
                 self.cmd.subscription_count() > 0
                 and self.stop_pub.subscription_count() > 0
                 and all(sub.publisher_count() > 0 for sub in self.subs)
+                and self.peers.matched([PITCH_COMMAND.name, PITCH_STOP.name])
             ),
             timeout_s,
         )

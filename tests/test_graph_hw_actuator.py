@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from graph_support import subscribe_diagnostics, wait_diagnostics
+from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 
 from rig_runtime.interface import PITCH_COMMAND, PITCH_JOINT, PITCH_STATE, joint_position
 from rig_runtime.messages import set_stamp, stamp_to_ns
@@ -41,6 +41,7 @@ class HwClient:
         self.states: list[tuple[int, float]] = []  # controller stamp [ns], pitch [deg]
         self.diagnostics: list[tuple[str, dict[str, str]]] = []  # hardware_id, values
         self.sent: list[tuple[int, float]] = []  # wall ns, command [rad]
+        self.peers = PeerReaders(self.node)
         self.subs = [
             self.node.create_subscription(
                 PITCH_STATE.type, PITCH_STATE.name, self._on_state, PITCH_STATE.qos
@@ -62,6 +63,7 @@ class HwClient:
             lambda: (
                 self.cmd.subscription_count() > 0
                 and all(sub.publisher_count() > 0 for sub in self.subs)
+                and self.peers.matched([PITCH_COMMAND.name])
                 and len(self.states) > 10
             ),
             timeout_s,
@@ -210,7 +212,13 @@ def test_forwards_commands_and_tracks_a_sine_at_the_controller_rate(rig: Any) ->
     assert np.mean(near <= step + 1e-12) > 0.95, (near.max(), step)  # a stalled command: more
     assert "watchdog" not in modes  # heartbeats and setpoints kept the controller's watchdog fed
 
-    hardware_id, diag = client.wait_diagnostics(lambda d: int(d.get("states_published", 0)) > 500)
+    # A diagnostics report from after the sine (the first ones may predate its last setpoints).
+    hardware_id, diag = client.wait_diagnostics(
+        lambda d: (
+            int(d.get("states_published", 0)) > 500
+            and int(d.get("setpoints_sent", 0)) >= len(values)
+        )
+    )
     assert hardware_id.startswith("pwac://127.0.0.1:")
     assert int(diag["feedback_received"]) >= int(diag["states_published"]) > 500
     assert int(diag["setpoints_sent"]) >= len(values)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from graph_support import subscribe_diagnostics, wait_diagnostics
+from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 
 from pressure_scanner.integration import PressureIntegrator
 from pressure_scanner.tap_cloud import fill_cloud
@@ -39,6 +39,7 @@ class LiftClient:
         )
         self.out: list[tuple[int, np.ndarray]] = []
         self.diagnostics: list[dict[str, str]] = []
+        self.peers = PeerReaders(self.node)
         self.subs = [
             self.node.create_subscription(
                 WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, self._on_out, WING_COEFFICIENTS.qos
@@ -60,6 +61,7 @@ class LiftClient:
                 self.state_pub.subscription_count() > 0
                 and self.taps_pub.subscription_count() > 0
                 and all(sub.publisher_count() > 0 for sub in self.subs)
+                and self.peers.matched([PITCH_STATE.name, PRESSURE_TAPS.name])
             ),
             timeout_s,
         )
