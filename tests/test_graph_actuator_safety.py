@@ -26,7 +26,7 @@ from rig_runtime.interface import (
 )
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, join_graph
+from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 
 FS = 200.0
 PERIOD_NS = 5_000_000
@@ -198,7 +198,8 @@ def test_non_finite_commands_are_refused_and_still_answered(actuator: Any) -> No
     diag = client.wait_diagnostics(lambda d: d.get("refused") == "2")
     assert diag["accepted"] == "82"
     assert procs.procs[0].poll() is None  # the node lives on
-    assert "refused non-finite pitch command" in procs.log("sim_actuator")
+    # Events are logged by their own 0.1 s timer: the periodic status may count them first.
+    assert wait_for(lambda: "refused non-finite pitch command" in procs.log("sim_actuator"), 5.0)
 
 
 def _check_hold_then_ramp(

@@ -42,6 +42,7 @@ EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
 # Fast DDS reads its default QoS profiles from this file when the first participant is made.
 PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
 PROFILES_FILE = Path(__file__).with_name("fastdds_profiles.xml")
+PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in that file
 INSTALL_HINT = 'pip install "ros-jazzy-rclpy[fastrtps]" ros-jazzy-common-interfaces'
 # Parameters rclpy declares on every node itself.
 RCLPY_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
@@ -83,10 +84,18 @@ class RclpyPublisher:
     profile: QosProfile
 
     def publish(self, msg: Any) -> None:
-        self.publisher.publish(serialize(msg))
+        self.publish_raw(serialize(msg))
 
     def publish_raw(self, data: bytes) -> None:
-        self.publisher.publish(bytes(data))
+        start = time.monotonic()
+        try:
+            self.publisher.publish(bytes(data))
+        except Exception as exc:  # rclpy's RCLError: say which writer and how long it waited
+            waited = time.monotonic() - start
+            raise RuntimeError(
+                f"publishing on {self.topic} failed after {waited:.2f} s (Fast DDS gives up "
+                f"when a reader has not acknowledged for {PROFILE_BLOCKING_S} s): {exc}"
+            ) from exc
 
     def subscription_count(self) -> int:
         return int(self.publisher.get_subscription_count())
