@@ -129,6 +129,18 @@ class ParameterSet:
         return dict(self.values)
 
 
+class _ParameterFileLoader(yaml.SafeLoader):
+    """YAML as rcl reads parameter files: safe, plus ``!!python/tuple`` as a list. launch_ros
+    writes the ``parameters=[{...}]`` of a launch file to a temporary file with ``yaml.dump``,
+    after turning every list into a tuple; rclpy nodes read those, so the DDS backend must."""
+
+
+_ParameterFileLoader.add_constructor(
+    "tag:yaml.org,2002:python/tuple",
+    lambda loader, node: list(loader.construct_sequence(node)),  # type: ignore[arg-type]
+)
+
+
 def _parse_override(text: str) -> Any:
     """ROS 2 parses ``-p name:=value`` values as YAML scalars or flow sequences."""
     try:
@@ -188,7 +200,7 @@ def resolve_parameters(
     for file in param_files:
         path = Path(file)
         try:
-            document = yaml.safe_load(path.read_text())
+            document = yaml.load(path.read_text(), Loader=_ParameterFileLoader)
         except OSError as exc:
             raise ParameterError(f"cannot read parameter file {path}: {exc}") from exc
         except yaml.YAMLError as exc:

@@ -105,3 +105,18 @@ def test_help_lists_parameters() -> None:
     )
     assert proc.returncode == 0
     assert "rate_hz" in proc.stdout and "range [0, inf]" in proc.stdout
+
+
+def test_launch_ros_parameter_files_with_tuples_are_read(tmp_path: Path) -> None:
+    """launch_ros dumps a launch file's parameter dict with yaml.dump after turning lists into
+    tuples; rclpy nodes read ``!!python/tuple`` as a list, and so must the DDS backend."""
+    import yaml
+
+    path = tmp_path / "launch_params_x"
+    path.write_text(yaml.dump({"/**": {"ros__parameters": {"names": ("/a", "/b")}}}))
+    assert "!!python/tuple" in path.read_text()
+    declared = [Parameter("names", [], "nodes", element_type=str)]
+    assert resolve_parameters(declared, "/gen", [path]).values["names"] == ["/a", "/b"]
+    path.write_text("/**:\n  ros__parameters:\n    names: !!python/object/apply:os.system [x]\n")
+    with pytest.raises(ParameterError, match="not valid YAML"):
+        resolve_parameters(declared, "/gen", [path])
