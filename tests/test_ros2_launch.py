@@ -10,7 +10,6 @@ machine after ``source install/setup.bash``.
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -46,29 +45,10 @@ pytestmark = pytest.mark.skipif(_launch_ready() is not None, reason=str(_launch_
 @pytest.fixture(scope="module")
 def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``colcon build`` of the workspace into a temporary install (as a ROS user builds it)."""
+    from test_colcon_workspace import _colcon
+
     tmp = tmp_path_factory.mktemp("colcon")
-    colcon = shutil.which("colcon", path=str(BIN))
-    assert colcon is not None, "colcon is not installed in the venv"
-    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}")
-    build = subprocess.run(
-        [
-            colcon,
-            "--log-base",
-            str(tmp / "log"),
-            "build",
-            "--base-paths",
-            str(ROOT / "src"),
-            "--build-base",
-            str(tmp / "build"),
-            "--install-base",
-            str(tmp / "install"),
-        ],
-        cwd=tmp,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    build = _colcon(tmp, "build")
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
     return tmp / "install"
 
