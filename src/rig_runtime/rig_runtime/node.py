@@ -338,9 +338,9 @@ class Node:
                     self.request_shutdown(1)
             return not self._shutdown_requested
 
-        # rclpy's EventsExecutor.spin_until_future_complete (its own loop, no return to Python
-        # between events) was measured slower here than this loop (short campaign: streaming
-        # 20.7 s against 15.2 s), and never returns without a timeout in rclpy 7.1.6.
+        # One event per turn on both backends. rclpy's EventsExecutor.spin_until_future_complete
+        # (its own loop) never returns without a timeout in rclpy 7.1.6, and was not faster in
+        # the one measurement taken (on a machine disturbed by another process).
         while keep_going():
             self._backend.spin_once(0.05)
 

@@ -192,11 +192,7 @@ def resolve_parameters(
     overrides: Sequence[tuple[str, str]] = (),
 ) -> ParameterSet:
     """Defaults, then files in order, then ``-p`` overrides; every value validated."""
-    decl = {p.name: p for p in declared}
-    result = ParameterSet(declared=decl)
-    for p in decl.values():
-        result.values[p.name] = p.validate(p.default, "default")
-        result.sources[p.name] = "default"
+    result = default_parameters(declared)
     for file in param_files:
         path = Path(file)
         try:
@@ -207,14 +203,29 @@ def resolve_parameters(
             raise ParameterError(f"parameter file {path} is not valid YAML: {exc}") from exc
         for section in _node_sections(document, fq_node_name, path):
             for name, value in section.items():
-                _assign(result, name, value, f"{path}")
+                assign(result, name, value, f"{path}")
     for name, text in overrides:
-        _assign(result, name, _parse_override(text), f"-p {name}:={text}")
+        assign(result, name, _parse_override(text), f"-p {name}:={text}")
     return result
 
 
-def _assign(result: ParameterSet, name: str, value: Any, source: str) -> None:
-    if name in ("use_sim_time",):  # accepted by every ROS 2 node; we keep stamps explicit
+def default_parameters(declared: Iterable[Parameter]) -> ParameterSet:
+    """Every declared parameter at its (validated) default."""
+    result = ParameterSet(declared={p.name: p for p in declared})
+    for p in result.declared.values():
+        result.values[p.name] = p.validate(p.default, "default")
+        result.sources[p.name] = "default"
+    return result
+
+
+# Accepted by every ROS 2 node (rclpy declares them itself); we keep stamps explicit.
+ROS_NODE_PARAMETERS = ("use_sim_time", "start_type_description_service")
+
+
+def assign(result: ParameterSet, name: str, value: Any, source: str) -> None:
+    """Set one parameter from ``source``: an unknown name or invalid value raises
+    ParameterError naming both (the one rule for files, ``-p`` and rcl's overrides)."""
+    if name in ROS_NODE_PARAMETERS:
         return
     if name not in result.declared:
         known = ", ".join(sorted(result.declared)) or "none"

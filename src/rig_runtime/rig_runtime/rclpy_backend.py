@@ -34,18 +34,15 @@ from typing import Any
 from .barrier import Endpoint
 from .messages import deserialize, normalize_type_name, serialize
 from .names import ArgumentError
-from .params import Parameter, ParameterError, ParameterSet
+from .params import Parameter, ParameterError, ParameterSet, assign, default_parameters
 from .qos import QosProfile
-from .ros_environment import domain_id
+from .ros_environment import INSTALL_RCLPY, domain_id
 
 EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
 # Fast DDS reads its default QoS profiles from this file when the first participant is made.
 PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
 PROFILES_FILE = Path(__file__).with_name("fastdds_profiles.xml")
 PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in that file
-INSTALL_HINT = 'pip install "ros-jazzy-rclpy[fastrtps]" ros-jazzy-common-interfaces'
-# Parameters rclpy declares on every node itself.
-RCLPY_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
 def message_class(type_name: str) -> Any:
@@ -57,7 +54,7 @@ def message_class(type_name: str) -> Any:
     except (ImportError, AttributeError) as exc:
         raise ImportError(
             f"the rclpy backend needs the Python package of {type_name} ({pkg}): "
-            f"{INSTALL_HINT} ({exc})"
+            f"{INSTALL_RCLPY} ({exc})"
         ) from exc
 
 
@@ -87,14 +84,12 @@ class RclpyPublisher:
         self.publish_raw(serialize(msg))
 
     def publish_raw(self, data: bytes) -> None:
-        start = time.monotonic()
         try:
             self.publisher.publish(bytes(data))
-        except Exception as exc:  # rclpy's RCLError: say which writer and how long it waited
-            waited = time.monotonic() - start
+        except Exception as exc:  # rclpy's RCLError: say which writer and why it gave up
             raise RuntimeError(
-                f"publishing on {self.topic} failed after {waited:.2f} s (Fast DDS gives up "
-                f"when a reader has not acknowledged for {PROFILE_BLOCKING_S} s): {exc}"
+                f"publishing on {self.topic} failed: a reader has not acknowledged for "
+                f"{PROFILE_BLOCKING_S} s (Fast DDS's max_blocking_time), or it is gone: {exc}"
             ) from exc
 
     def subscription_count(self) -> int:
@@ -204,7 +199,7 @@ def _import_rclpy() -> Any:
     except ImportError as exc:
         raise ArgumentError(
             f"RIG_RUNTIME_BACKEND=rclpy but rclpy does not import ({exc}); install it with "
-            f"`{INSTALL_HINT}` (CPython 3.10-3.13 on x86_64 Linux) or source a ROS 2 Jazzy "
+            f"`{INSTALL_RCLPY}` (CPython 3.10-3.13 on x86_64 Linux) or source a ROS 2 Jazzy "
             "install, or use RIG_RUNTIME_BACKEND=dds"
         ) from None
     return rclpy
@@ -229,6 +224,9 @@ class RclpyBackend:
         from rclpy.signals import SignalHandlerOptions
 
         cli_args = list(argv)
+        choice = os.environ.get(EXECUTOR_ENV, "events").strip().lower()
+        if choice not in ("events", "single"):  # checked before anything is created
+            raise ArgumentError(f"{EXECUTOR_ENV}={choice!r}: expected 'events' or 'single'")
         # Writers block up to 60 s for a slow reader, as on the DDS backend (the XML says why).
         os.environ.setdefault(PROFILES_ENV, str(PROFILES_FILE))
         # A context per node: its own participant in the domain of this moment (tests move
@@ -254,10 +252,6 @@ class RclpyBackend:
             raise ArgumentError(
                 f"invalid ROS arguments {cli_args}: {type(exc).__name__}: {exc}"
             ) from None
-        choice = os.environ.get(EXECUTOR_ENV, "events").strip().lower()
-        if choice not in ("events", "single"):
-            raise ArgumentError(f"{EXECUTOR_ENV}={choice!r}: expected 'events' or 'single'")
-        self.executor_name = choice
         self._executor = (
             _events_executor(self._context)
             if choice == "events"
@@ -293,31 +287,19 @@ class RclpyBackend:
         (``--params-file``, ``-p``) are checked by the same rules as on the DDS backend."""
         from rclpy.exceptions import InvalidParameterValueException
 
-        decl = {p.name: p for p in declared}
-        overrides = dict(self.node._parameter_overrides)  # parsed by rcl from cli_args
-        unknown = sorted(set(overrides) - set(decl) - set(RCLPY_OWN_PARAMETERS))
-        if unknown:
-            known = ", ".join(sorted(decl)) or "none"
-            raise ParameterError(
-                f"unknown parameter {unknown[0]!r} (from the ROS arguments); this node "
-                f"declares: {known}"
-            )
-        result = ParameterSet(declared=decl)
+        result = default_parameters(declared)
+        for name, override in self.node._parameter_overrides.items():  # parsed by rcl
+            given = override.value
+            if isinstance(given, array.array):  # rclpy's numeric arrays
+                given = list(given)
+            assign(result, name, given, f"--ros-args ({name}:={given!r})")
         for p in declared:
-            value = p.validate(p.default, "default")
-            source = "default"
-            if p.name in overrides:
-                given = overrides[p.name].value
-                if isinstance(given, array.array):  # rclpy's numeric arrays
-                    given = list(given)
-                value = p.validate(given, f"--ros-args ({p.name}:={given!r})")
-                source = "--ros-args"
+            if result.sources[p.name] != "default":
+                result.sources[p.name] = "--ros-args"
             try:
-                self._declare(p, value)
+                self._declare(p, result.values[p.name])
             except InvalidParameterValueException as exc:
                 raise ParameterError(f"parameter {p.name!r}: {exc}") from None
-            result.values[p.name] = value
-            result.sources[p.name] = source
         self._params = result
         self.node.add_on_set_parameters_callback(self._set_parameters)
         return result
