@@ -1,32 +1,111 @@
-"""Hyperparameters of the identification pipeline (pipeline.py), in a module of their own so
-that the identifier node can hold them without loading the numerical stack."""
+"""Hyperparameters of the identification pipeline (pipeline.py), declared once.
 
+Each field of :class:`IdentificationConfig` carries its default, description and range
+(:func:`hyper`). Everything else is generated from that declaration: the identifier node's
+parameters (:func:`config_parameters`, read back by :func:`config_from_parameters`), the
+command-line flags (:func:`add_config_arguments`, :func:`config_from_args`) and the JSON form
+(:meth:`IdentificationConfig.to_dict`, :meth:`IdentificationConfig.from_dict`). aero_rig's
+``config/identifier.yaml`` is tested equal to the defaults (test_config.py).
+
+A module of its own, standard library and ``rig_runtime.params`` only, so that the identifier
+node can hold the config without loading the numerical stack.
+"""
+
+import argparse
+import dataclasses
+import math
+import typing
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
+
+from rig_runtime.params import Parameter, ParameterError
+
+# Value kinds of the fields, from their annotations: scalars, tuples of scalars (list
+# parameters), and tuples of integer tuples (lists of strings "2,3", e.g. degree sets).
+_SCALARS: tuple[type, ...] = (bool, int, float, str)
+_TYPE_NAMES = {bool: "bool", int: "int", float: "float", str: "string"}
+
+
+def hyper(
+    default: Any,
+    description: str,
+    *,
+    min: float | None = None,
+    max: float | None = None,
+    choices: Sequence[str] | None = None,
+) -> Any:
+    """A hyperparameter field: its default, one-line description and range.
+
+    ``min``/``max`` bound every number of the value (the elements of a tuple, the integers of
+    a degree set); ``choices`` restrict every string of it.
+    """
+    return dataclasses.field(
+        default=default,
+        metadata={
+            "description": description,
+            "min": min,
+            "max": max,
+            "choices": None if choices is None else tuple(choices),
+        },
+    )
 
 
 @dataclass(frozen=True)
 class IdentificationConfig:
-    """Hyperparameters of the pipeline (the identifier node's parameters)."""
+    """Hyperparameters of the pipeline (the identifier node's parameters).
 
-    nx: int = 1  # states of BLA SS and PNLSS (paper: 1)
-    degrees: tuple[int, ...] = (2, 3, 4, 5)  # PNLSS monomial degrees (paper: 2..5)
-    structure: str = "full"
-    max_iter: int = 100  # LM iterations (the paper used 50 for its order scan)
-    estimation_realization: int = 0
-    validation_realization: int = 1
-    min_periods: int = 2
+    Values are checked on construction (ValueError naming the field); lists are accepted for
+    tuples, and degree sets may be written as strings ("2,3").
+    """
+
+    nx: int = hyper(
+        1,
+        "states of the BLA state-space and PNLSS models (paper: 1); 0: chosen per level by the "
+        "subspace order scan over 1..max_order",
+        min=0,
+        max=12,
+    )
+    max_order: int = hyper(
+        12, "highest order of the subspace order scan when nx = 0", min=1, max=30
+    )
+    degrees: tuple[int, ...] = hyper(
+        (2, 3, 4, 5), "PNLSS monomial degrees (paper: 2..5)", min=2, max=7
+    )
+    structure: str = hyper(
+        "full",
+        "PNLSS monomials: of states and input (full), of the states only, or of the input only",
+        choices=("full", "statesonly", "inputsonly"),
+    )
+    # The paper used 50 iterations for its order scan.
+    max_iter: int = hyper(100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000)
+    estimation_realization: int = hyper(0, "realization of every level used for estimation", min=0)
+    validation_realization: int = hyper(1, "realization used for validation", min=0)
+    min_periods: int = hyper(
+        2,
+        "fewest valid periods a realization needs for its level to be fitted (and to be kept "
+        "by the clustering)",
+        min=1,
+    )
     # Period clustering (clustering.py): the BLA and the models use each level's dominant
     # cluster only. clustering_ablation: the final identification also runs the whole pipeline
     # without clustering (every valid period), for table1_no_clustering and clustering.md.
-    clustering: bool = True
-    clustering_ablation: bool = True
+    clustering: bool = hyper(True, "model each level's dominant cluster of periods only")
+    clustering_ablation: bool = hyper(
+        True,
+        "final identification also without clustering (table1_no_clustering, clustering.md)",
+    )
     # How the levels weigh in the all-levels PNLSS cost and in the choice of its iterate:
     # "none": absolute errors (the largest level dominates); "relative": each level's record
     # by 1 / var(its output), the sum of the levels' squared relative errors that Table 1
     # reports. Measured on the default campaign (README, "PNLSS against the BLA"): relative
     # weighting halves the medium-level errors but the low-level sines make the model run away
     # (relative error ~50), so the default stays "none".
-    level_weighting: str = "none"
+    level_weighting: str = hyper(
+        "none",
+        "weights of the levels in the all-levels PNLSS cost",
+        choices=("none", "relative"),
+    )
     # Cross-validated structure scan (scan.py) for the final all-levels PNLSS instead of the
     # one structure above: every (nx, degrees, equations) of the grid is fitted from the
     # level-1 BLA's subspace model of that order and scored on the validation realization;
@@ -34,13 +113,285 @@ class IdentificationConfig:
     # single structure (they must stay fast). Default grid: nx ≤ 2, since an nx = 3 candidate
     # with degrees 2-5 costs 15-30 s alone on two cores (README, "PNLSS structure scan"). Each
     # structure is tried from two LM starts (scan.STARTS).
-    scan: bool = True
-    scan_nx: tuple[int, ...] = (1, 2)
-    scan_degrees: tuple[tuple[int, ...], ...] = ((2,), (2, 3), (2, 3, 4, 5))
-    scan_equations: tuple[str, ...] = ("state", "state+output")
-    scan_max_iter: int = 50  # the paper's scan: 50 Levenberg–Marquardt iterations
-    scan_workers: int = 1  # local worker processes (0: every core; 1: in this process)
-    scan_scheduler: str = ""  # Dask scheduler to run the scan on (tcp://HOST:8786); "": local
+    scan: bool = hyper(True, "final all-levels PNLSS by the cross-validated structure scan")
+    scan_nx: tuple[int, ...] = hyper((1, 2), "scan: state orders", min=1, max=6)
+    scan_degrees: tuple[tuple[int, ...], ...] = hyper(
+        ((2,), (2, 3), (2, 3, 4, 5)), "scan: degree sets, e.g. '2,3' (degrees 2..7)", min=2, max=7
+    )
+    scan_equations: tuple[str, ...] = hyper(
+        ("state", "state+output"),
+        "scan: where monomials enter",
+        choices=("state", "state+output"),
+    )
+    # The paper's scan: 50 Levenberg–Marquardt iterations.
+    scan_max_iter: int = hyper(50, "scan: Levenberg-Marquardt iterations per fit", min=1)
+    scan_workers: int = hyper(
+        1, "scan: local worker processes (0 = every core, 1 = in this process)", min=0
+    )
+    scan_scheduler: str = hyper(
+        "", "scan: Dask scheduler address, e.g. tcp://HOST:8786 ('' = local processes)"
+    )
+
+    def __post_init__(self) -> None:
+        for spec in _SPECS:
+            object.__setattr__(self, spec.name, spec.coerce(getattr(self, spec.name)))
+        if self.estimation_realization == self.validation_realization:
+            raise ParameterError(
+                "parameters 'estimation_realization' and 'validation_realization' must differ"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every field by name, JSON-able (tuples as lists, degree sets as lists of ints)."""
+        return {spec.name: _jsonable(getattr(self, spec.name)) for spec in _SPECS}
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> "IdentificationConfig":
+        """The config of :meth:`to_dict`'s form; missing keys take their defaults, an unknown
+        key or an invalid value raises ValueError (ParameterError) naming it."""
+        known = {spec.name for spec in _SPECS}
+        unknown = sorted(str(k) for k in values if k not in known)
+        if unknown:
+            raise ParameterError(
+                f"unknown identification parameter(s) {', '.join(map(repr, unknown))}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        return cls(**dict(values))
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """One field of the declaration: name, default, range and value kind."""
+
+    name: str
+    default: Any
+    description: str
+    min: float | None
+    max: float | None
+    choices: tuple[str, ...] | None
+    kind: str  # "scalar", "list" (tuple of scalars) or "sets" (tuple of integer tuples)
+    element: type  # the scalar type (of the elements)
+
+    def coerce(self, value: Any) -> Any:
+        """``value`` as the field's type (lists as tuples, "2,3" as (2, 3)), range-checked;
+        ParameterError naming the field when it is not one."""
+        if self.kind == "scalar":
+            return self._scalar(value, value)
+        if not isinstance(value, list | tuple) or not value:
+            raise self._error(value, "a non-empty list")
+        if self.kind == "list":
+            return tuple(self._scalar(v, value) for v in value)
+        sets = []
+        for item in value:
+            if isinstance(item, str):
+                try:
+                    item = parse_degrees(item)
+                except ValueError as exc:
+                    raise self._error(value, str(exc), expected=False) from None
+            if not isinstance(item, list | tuple) or not item:
+                raise self._error(value, "a list of integer sets such as '2,3' or [2, 3]")
+            sets.append(tuple(self._scalar(v, value) for v in item))
+        return tuple(sets)
+
+    def _scalar(self, value: Any, whole: Any) -> Any:
+        kind = self.element
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if (kind is not bool and isinstance(value, bool)) or not isinstance(value, kind):
+            raise self._error(whole, f"type {self.type_name()}")
+        if (
+            isinstance(value, int | float)
+            and not isinstance(value, bool)
+            and (
+                math.isnan(value)
+                or (self.min is not None and value < self.min)
+                or (self.max is not None and value > self.max)
+            )
+        ):
+            raise self._error(whole, self.describe_range())
+        if self.choices and value not in self.choices:
+            raise self._error(whole, f"one of {list(self.choices)}")
+        return value
+
+    def type_name(self) -> str:
+        name = _TYPE_NAMES[self.element]
+        if self.kind == "list":
+            return f"list of {name}"
+        if self.kind == "sets":
+            return "list of integer sets ('2,3')"
+        return name
+
+    def describe_range(self) -> str:
+        parts = [f"type {self.type_name()}"]
+        if self.min is not None or self.max is not None:
+            lo = "-inf" if self.min is None else f"{self.min:g}"
+            hi = "inf" if self.max is None else f"{self.max:g}"
+            parts.append(f"range [{lo}, {hi}]")
+        if self.choices:
+            parts.append(f"one of {list(self.choices)}")
+        return ", ".join(parts)
+
+    def _error(self, value: Any, what: str, expected: bool = True) -> ParameterError:
+        reason = f"expected {what}" if expected else what
+        return ParameterError(
+            f"identification parameter {self.name!r} = {value!r} is invalid: {reason} — "
+            f"{self.description}"
+        )
+
+    def parameter(self) -> Parameter:
+        """The node parameter: lists for tuples, degree sets as strings "2,3"."""
+        if self.kind == "sets":  # the numbers' range is checked by coerce (parse: strings)
+            text = [",".join(map(str, s)) for s in self.default]
+            return Parameter(self.name, text, self.description, element_type=str)
+        return Parameter(
+            self.name,
+            list(self.default) if self.kind == "list" else self.default,
+            self.description,
+            min=self.min,
+            max=self.max,
+            choices=self.choices,
+            element_type=self.element if self.kind == "list" else None,
+        )
+
+
+def _read_specs() -> tuple[_Spec, ...]:
+    """The declaration: IdentificationConfig's fields, their metadata and annotations."""
+    hints = typing.get_type_hints(IdentificationConfig)
+    specs = []
+    for f in dataclasses.fields(IdentificationConfig):
+        kind, element = _kind(f.name, hints[f.name])
+        meta = f.metadata
+        specs.append(
+            _Spec(
+                f.name,
+                f.default,
+                meta["description"],
+                meta["min"],
+                meta["max"],
+                meta["choices"],
+                kind,
+                element,
+            )
+        )
+    return tuple(specs)
+
+
+def _kind(name: str, annotation: Any) -> tuple[str, type]:
+    if annotation in _SCALARS:
+        return "scalar", annotation
+    args = typing.get_args(annotation)
+    if typing.get_origin(annotation) is tuple and len(args) == 2 and args[1] is Ellipsis:
+        if args[0] in _SCALARS:
+            return "list", args[0]
+        if typing.get_args(args[0]) == (int, Ellipsis):
+            return "sets", int
+    raise TypeError(f"IdentificationConfig.{name}: unsupported annotation {annotation!r}")
+
+
+_SPECS = _read_specs()
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, tuple):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+def config_parameters() -> list[Parameter]:
+    """The identifier node's identification parameters, one per field, in declaration order
+    (tuples as list parameters; degree sets as strings "2,3")."""
+    return [spec.parameter() for spec in _SPECS]
+
+
+def config_from_parameters(values: Mapping[str, Any]) -> IdentificationConfig:
+    """The config from node parameter values (:func:`config_parameters`'s form). Names that
+    are not fields (the node's own parameters) are ignored, missing fields take their
+    defaults; an invalid value raises ValueError (ParameterError) naming the parameter."""
+    return IdentificationConfig(
+        **{spec.name: values[spec.name] for spec in _SPECS if spec.name in values}
+    )
+
+
+def _format_default(spec: _Spec) -> str:
+    value = spec.default
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if spec.kind == "list":
+        return " ".join(map(str, value))
+    if spec.kind == "sets":
+        return " ".join(",".join(map(str, s)) for s in value)
+    return repr(value) if value == "" else str(value)
+
+
+def _cli_type(spec: _Spec) -> Any:
+    """argparse ``type``: one element, checked against the declaration (argparse reports the
+    message); ``coerce`` checks the whole value again in config_from_args."""
+
+    def convert(text: str) -> Any:
+        try:
+            if spec.kind == "sets":
+                value: Any = parse_degrees(text)
+                for v in value:
+                    spec._scalar(v, text)
+                return value
+            value = spec.element(text)
+            return spec._scalar(value, text)
+        except ValueError as exc:  # ParameterError too
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    convert.__name__ = spec.name  # argparse's "invalid <name> value" for other errors
+    return convert
+
+
+def add_config_arguments(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+    only: Iterable[str] | None = None,
+) -> None:
+    """Add a flag per field (or per field named in ``only``): ``--max-iter N``, ``--degrees 2
+    3 4 5``, ``--scan-degrees 2 2,3 2,3,4,5``, ``--clustering/--no-clustering``. Every
+    default is None, so :func:`config_from_args` sees only the flags that were given."""
+    specs = {spec.name: spec for spec in _SPECS}
+    names = list(specs) if only is None else list(only)
+    unknown = [n for n in names if n not in specs]
+    if unknown:
+        raise ValueError(f"not identification parameters: {unknown}; known: {sorted(specs)}")
+    for name in names:
+        spec = specs[name]
+        flag = "--" + name.replace("_", "-")
+        text = f"{spec.description} (default {_format_default(spec)})".replace("%", "%%")
+        if spec.kind == "scalar" and spec.element is bool:
+            parser.add_argument(
+                flag, dest=name, action=argparse.BooleanOptionalAction, default=None, help=text
+            )
+            continue
+        options: dict[str, Any] = {"dest": name, "default": None, "help": text}
+        options["type"] = _cli_type(spec)
+        if spec.kind != "scalar":
+            options["nargs"] = "+"
+        if spec.choices:
+            options["metavar"] = "{" + ",".join(spec.choices) + "}"
+        elif spec.kind == "sets":
+            options["metavar"] = "D[,D...]"
+        elif spec.element is str:
+            options["metavar"] = "TEXT"
+        else:
+            options["metavar"] = "N" if spec.element is int else "X"
+        parser.add_argument(flag, **options)
+
+
+def config_from_args(
+    args: argparse.Namespace, base: IdentificationConfig | None = None
+) -> tuple[IdentificationConfig, dict[str, Any]]:
+    """``base`` (default: the declared defaults) with the flags of :func:`add_config_arguments`
+    that were given, and those overrides by name (JSON-able, for the caller to print or
+    record). ValueError (ParameterError) naming the parameter when the result is invalid."""
+    base = base if base is not None else IdentificationConfig()
+    given = {
+        spec.name: getattr(args, spec.name)
+        for spec in _SPECS
+        if getattr(args, spec.name, None) is not None
+    }
+    config = dataclasses.replace(base, **given)
+    return config, {name: _jsonable(getattr(config, name)) for name in given}
 
 
 def parse_degrees(text: str) -> tuple[int, ...]:

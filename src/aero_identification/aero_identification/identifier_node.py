@@ -45,38 +45,15 @@ from rig_runtime.interface import (
 
 from . import refit_worker
 from .campaign import CampaignAssembler
-from .config import IdentificationConfig, parse_degrees
+from .config import config_from_parameters, config_parameters
 from .quality import data_quality_lines
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
 
 PARAMETERS = [
     Parameter("output_dir", "", "run directory for models.json and the report ('' = none)"),
-    Parameter("nx", 1, "states of the BLA state-space and PNLSS models (paper: 1)", min=1, max=6),
-    Parameter("degrees", [2, 3, 4, 5], "PNLSS monomial degrees (paper: 2..5)", min=2, max=7),
-    Parameter("structure", "full", "PNLSS monomials", choices=("full", "statesonly", "inputsonly")),
-    Parameter("max_iter", 100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000),
-    Parameter("estimation_realization", 0, "realization of every level used for estimation", min=0),
-    Parameter("validation_realization", 1, "realization used for validation", min=0),
-    Parameter(
-        "level_weighting",
-        "none",
-        "weights of the levels in the all-levels PNLSS cost",
-        choices=("none", "relative"),
-    ),
-    Parameter("clustering", True, "model each level's dominant cluster of periods only"),
-    Parameter(
-        "clustering_ablation",
-        True,
-        "final identification also without clustering (table1_no_clustering, clustering.md)",
-    ),
-    Parameter("scan", True, "final all-levels PNLSS by the cross-validated structure scan"),
-    Parameter("scan_nx", [1, 2], "scan: state orders", min=1, max=6),
-    Parameter("scan_degrees", ["2", "2,3", "2,3,4,5"], "scan: degree sets, e.g. '2,3'"),
-    Parameter("scan_equations", ["state", "state+output"], "scan: where monomials enter"),
-    Parameter("scan_max_iter", 50, "scan: Levenberg-Marquardt iterations per fit", min=1),
-    Parameter("scan_workers", 1, "scan: local worker processes (0 = every core)", min=0),
-    Parameter("scan_scheduler", "", "scan: Dask scheduler address ('' = local processes)"),
+    # The identification hyperparameters, declared with their ranges in config.py.
+    *config_parameters(),
     Parameter("use_worker", True, "refit in a worker process (false: inline, for debugging)"),
     Parameter(
         "exit_after_final",
@@ -104,24 +81,7 @@ class Identifier:
     def __init__(self, node: Node) -> None:
         p = node.params
         self.node = node
-        self.config = IdentificationConfig(
-            nx=p["nx"],
-            degrees=tuple(p["degrees"]),
-            structure=p["structure"],
-            max_iter=p["max_iter"],
-            estimation_realization=p["estimation_realization"],
-            validation_realization=p["validation_realization"],
-            level_weighting=p["level_weighting"],
-            clustering=p["clustering"],
-            clustering_ablation=p["clustering_ablation"],
-            scan=p["scan"],
-            scan_nx=tuple(p["scan_nx"]),
-            scan_degrees=tuple(parse_degrees(text) for text in p["scan_degrees"]),
-            scan_equations=tuple(p["scan_equations"]),
-            scan_max_iter=p["scan_max_iter"],
-            scan_workers=p["scan_workers"],
-            scan_scheduler=p["scan_scheduler"],
-        )
+        self.config = config_from_parameters(p.as_dict())
         if self.config.estimation_realization == self.config.validation_realization:
             raise ValueError(
                 "parameters 'estimation_realization' and 'validation_realization' must differ"
