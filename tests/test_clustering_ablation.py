@@ -19,22 +19,30 @@ campaign and explained in docs/plant.md §7.
 
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from aero_identification import pipeline
 from aero_identification.campaign import CampaignAssembler
-from aero_identification.pipeline import (
-    IdentificationConfig,
-    IdentificationResult,
-    identify,
-    write_report,
-)
+from aero_identification.campaign_dataset import campaign_dataset
+from aero_identification.config import IdentificationConfig
+from aero_identification.report import write_report
+from aero_identification.results import IdentificationResult
 from aero_rig.simulation import T0_NS, SimulatedRun, simulate_plan
 from multisine_gen.campaigns import short_plan
 from wing_sim.wing_params import WingParams
 
 LIGHT_DWELL_S = 16.0
-HIGH = 1  # the short plan's levels: 0 (6.6°), 1 (19.9°)
+HIGH = 1  # the short plan's levels: 0 (6.6°, "low"), 1 (19.9°, "high")
+
+
+def identify(
+    asm: CampaignAssembler, config: IdentificationConfig, final: bool = False, **kw: Any
+) -> IdentificationResult:
+    """The identifier's chain: the campaign source adapter, then the one pipeline."""
+    dataset = campaign_dataset(asm, final, config.min_periods)
+    return pipeline.identify(dataset, config, final, **kw)
 
 
 @cache
@@ -62,12 +70,12 @@ def _dropped_periods_are_the_light_ones(seed: int) -> IdentificationResult:
     run, _, result = _scenario(seed)
     light = _light_periods(run, HIGH)
     # At the low offset the wing never stalls, so the regime (present there too) cannot show.
-    low, high = result.levels[0], result.levels[HIGH]
+    low, high = result.levels["low"], result.levels["high"]
     assert low.clusters is not None and low.clusters.k == 1
     assert high.clusters is not None and high.clusters.k >= 2
     np.testing.assert_array_equal(high.clusters.keep, ~light)
     plain = result.no_clustering
-    assert plain is not None and plain.levels[HIGH].periods_used == 8
+    assert plain is not None and plain.levels["high"].periods_used == 8
     assert high.periods_used < 8
     return result
 
@@ -84,7 +92,7 @@ def test_clustering_lowers_the_pnlss_error_on_the_held_out_dominant_periods() ->
 
 def test_every_final_report_carries_the_ablation(tmp_path: Path) -> None:
     _, asm, result = _scenario(2)
-    written = write_report(result, asm, tmp_path)
+    written = write_report(result, tmp_path)
     no_clustering = (tmp_path / "table1_no_clustering.md").read_text()
     assert no_clustering.startswith("| model | low 1 Hz |")
     assert no_clustering != (tmp_path / "table1_all_levels.md").read_text()

@@ -1,16 +1,28 @@
 """The campaign pipeline on an in-process simulation of the short plan (no middleware)."""
 
 import json
+from typing import Any
 
 import numpy as np
 import pytest
 
+from aero_identification import pipeline
 from aero_identification.campaign import CampaignAssembler
-from aero_identification.pipeline import IdentificationConfig, identify
+from aero_identification.campaign_dataset import campaign_dataset
+from aero_identification.config import IdentificationConfig
+from aero_identification.results import IdentificationResult
 from aero_rig.simulation import T0_NS as T0
 from aero_rig.simulation import simulate_plan
 from multisine_gen.campaigns import short_plan
 from wing_sim.wing_params import wing_params_preset
+
+
+def identify(
+    asm: CampaignAssembler, config: IdentificationConfig, final: bool = False, **kw: Any
+) -> IdentificationResult:
+    """The identifier's chain: the campaign source adapter, then the one pipeline."""
+    dataset = campaign_dataset(asm, final, config.min_periods)
+    return pipeline.identify(dataset, config, final, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +56,9 @@ def test_periods_with_gaps_or_duplicates_are_excluded_and_reported(campaign) -> 
     problem = block.period_problem(1)
     assert "1 pitch samples missing" in problem and "1 C_l samples duplicated" in problem
     result = identify(asm, IdentificationConfig(max_iter=5))
-    excluded = result.levels[seg["level"]].excluded
+    excluded = next(
+        lv for lv in result.levels.values() if lv.record.key == str(seg["level"])
+    ).excluded
     assert any("period 1" in e and "missing" in e for e in excluded)
 
 
@@ -58,7 +72,7 @@ def test_identification_of_the_short_campaign(campaign) -> None:
         assert e_all[("PNLSS", "low", f)] < 0.15
         assert e_all[("PNLSS", "high", f)] < e_all[("BLA SS", "high", f)]
         assert e_all[("PNLSS", "high", f)] * 2 < e_1[("BLA SS", "high", f)]
-    markdown, csv = result.tables()["all_levels"]
+    markdown, csv = result.tables()["table1_all_levels"]
     assert markdown.splitlines()[0] == "| model | low 1 Hz | low 1.6 Hz | high 1 Hz | high 1.6 Hz |"
     assert csv.count("\n") >= 3
     assert json.dumps(result.to_json_dict(), allow_nan=True)
@@ -107,7 +121,7 @@ def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> No
     sine = next(s for s in plan["segments"] if s["kind"] == "sine")
     asm = _assemble(campaign)
     clean = identify(asm, IdentificationConfig(max_iter=2), final=True)
-    assert clean.data_quality["clean"] and clean.tables()["all_levels"][0].startswith("| model")
+    assert clean.data_quality["clean"] and clean.tables()["table1_all_levels"][0].startswith("| model")
     stamp = lambda k: T0 + round(k * 1e9 / plan["fs"])  # noqa: E731
     # A free run over the last sample of period 2 and the first of period 3 of one block ...
     k = seg["start_k"] + seg["length"] - 1
@@ -252,7 +266,7 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
 
 def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     """config.scan: the all-levels PNLSS is the scan's choice, and the report holds the scan."""
-    from aero_identification.pipeline import write_report
+    from aero_identification.report import write_report
 
     asm = _assemble(campaign)
     config = IdentificationConfig(
@@ -273,7 +287,7 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     # ... and a re-validation of a scanned result reuses it.
     again = identify(asm, config, final=True, models_from=final)
     assert again.scan is final.scan and again.pnlss_all is final.pnlss_all
-    written = write_report(result, asm, tmp_path)
+    written = write_report(result, tmp_path)
     assert (tmp_path / "pnlss_scan.md").read_text().count("(selected)") == 1
     assert (tmp_path / "pnlss_scan.csv").read_text().count("\n") == 17
     assert written["pnlss_scan_plot"].stat().st_size > 10_000

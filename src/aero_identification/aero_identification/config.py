@@ -79,8 +79,15 @@ class IdentificationConfig:
     )
     # The paper used 50 iterations for its order scan.
     max_iter: int = hyper(100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000)
-    estimation_realization: int = hyper(0, "realization of every level used for estimation", min=0)
-    validation_realization: int = hyper(1, "realization used for validation", min=0)
+    pnlss: bool = hyper(True, "fit the PNLSS models (false: clustering, BLA and linear models)")
+    # PNLSS training and held-out data (pipeline.pnlss_sets): the held-out realization chooses
+    # the iterate and scores the scan's candidates; every other realization trains.
+    validation_realization: int = hyper(
+        1,
+        "realization whose periods choose the PNLSS iterate (the last one if a level has "
+        "fewer); every other realization trains it",
+        min=0,
+    )
     min_periods: int = hyper(
         2,
         "fewest valid periods a realization needs for its level to be fitted (and to be kept "
@@ -135,10 +142,6 @@ class IdentificationConfig:
     def __post_init__(self) -> None:
         for spec in _SPECS:
             object.__setattr__(self, spec.name, spec.coerce(getattr(self, spec.name)))
-        if self.estimation_realization == self.validation_realization:
-            raise ParameterError(
-                "parameters 'estimation_realization' and 'validation_realization' must differ"
-            )
 
     def to_dict(self) -> dict[str, Any]:
         """Every field by name, JSON-able (tuples as lists, degree sets as lists of ints)."""

@@ -82,10 +82,6 @@ class Identifier:
         p = node.params
         self.node = node
         self.config = config_from_parameters(p.as_dict())
-        if self.config.estimation_realization == self.config.validation_realization:
-            raise ValueError(
-                "parameters 'estimation_realization' and 'validation_realization' must differ"
-            )
         self.out_dir = p["output_dir"]
         self.assembler: CampaignAssembler | None = None
         self.early: list[tuple[str, int, float]] = []

@@ -1,37 +1,10 @@
-"""Data quality of a campaign: what the identification could not use, and why.
+"""Data quality: the lines that say what the identification could not use, and why (the
+account itself comes from the source adapter: campaign_dataset.data_quality, records).
 
 Light (no numerical stack): the identifier node and the command line read these records too.
 """
 
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from .campaign import CampaignAssembler
-    from .pipeline import IdentificationResult
-
-
-def data_quality(assembler: "CampaignAssembler", result: "IdentificationResult") -> dict[str, Any]:
-    """What the identification could not use, and why: every plan sample accounted for on both
-    channels, the anomalies that touch the plan, the excluded periods and sine records.
-
-    ``clean`` is false as soon as any of these is not empty: such a run says so in its
-    report, its status and the campaign's exit code.
-    """
-    samples = assembler.sample_accounting(final=result.complete)
-    anomalies = assembler.plan_anomalies()
-    periods = [
-        f"{lv.name}: {text}"
-        for lv in sorted(result.levels.values(), key=lambda r: r.offset_deg)
-        for text in lv.excluded
-    ]
-    lost = sum(c["missing"] + c["duplicated"] for c in samples.values())
-    return {
-        "clean": not (lost or anomalies or periods or result.excluded_sines),
-        "samples": samples,
-        "anomalies": anomalies,
-        "excluded_periods": periods,
-        "excluded_sines": list(result.excluded_sines),
-    }
+from typing import Any
 
 
 def data_quality_lines(quality: dict[str, Any]) -> list[str]:

@@ -30,13 +30,13 @@ import fnmatch
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aero_identification.data import PeriodicData
+from aero_identification.data import PeriodicData, transient_periods
+from aero_identification.dataset import Dataset, LevelRecord
 
 FORMATS = ("csv", "mat")
 FS_NAMES = ("fs", "Fs", "FS")
@@ -79,32 +79,6 @@ class SamplingRateError(RecordError):
     """No sampling frequency, or inconsistent ones (within a file, with --fs, between files)."""
 
 
-@dataclass(frozen=True, eq=False)
-class LevelRecord:
-    """One level's periodic record as read from a file.
-
-    Attributes:
-        name: the level's short name (`level_name`).
-        path: the file.
-        data: the periods (N, P, M) after any requested drop, with the detected excited lines.
-        periods_in_file: P before dropping.
-        dropped_periods: leading periods dropped on request (0 unless asked).
-        notes: what the reader did (layout, fs source, excited lines), for the report.
-    """
-
-    name: str
-    path: Path
-    data: PeriodicData
-    periods_in_file: int
-    dropped_periods: int = 0
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def input_rms(self) -> float:
-        """RMS of the input around its mean, over the kept periods."""
-        return float(np.std(self.data.u))
-
-
 def level_name(path: str | Path) -> str:
     """Short name of the level in a file: k for a stem containing "Level<k>" (any case,
     optionally "level_k" or "level-k"), otherwise the file stem."""
@@ -116,7 +90,7 @@ def level_name(path: str | Path) -> str:
 def matches_level(token: str, record: LevelRecord) -> bool:
     """Whether a user's level selector names this record: equal to its short name or file stem,
     or a glob pattern matching either (e.g. "3", "F16Data_FullMSine_Level3", "*Level3*")."""
-    names = (record.name, record.path.stem, record.path.name)
+    names = (record.name, *((record.path.stem, record.path.name) if record.path else ()))
     return any(token == n or fnmatch.fnmatchcase(n, token) for n in names)
 
 
@@ -443,7 +417,15 @@ def read_record(
         f"{lines.size} excited lines detected in the input, {lines[0] * df:g} … "
         f"{lines[-1] * df:g} Hz"
     )
-    return LevelRecord(level_name(path), path, data, P, drop_periods, notes)
+    return LevelRecord(
+        level_name(path),
+        data,
+        key=level_name(path),
+        path=path,
+        periods_in_file=P,
+        dropped_periods=drop_periods,
+        notes=tuple(notes),
+    )
 
 
 def find_files(source: str | Path, fmt: str, patterns: Sequence[str] | None = None) -> list[Path]:
@@ -514,3 +496,44 @@ def read_records(
             )
         names[rec.name] = rec.path
     return records
+
+
+def records_dataset(records: Sequence[LevelRecord], source: str = "") -> Dataset:
+    """The CSV/MAT source: level records as a `Dataset`, lowest input RMS first, with the
+    reading account as its data quality (the reader refuses what it cannot read whole, so a
+    dataset of records is clean) and a warning per level whose first periods look transient
+    (`data.transient_periods`: reported, nothing dropped unless asked)."""
+    levels = sorted(records, key=lambda r: r.input_rms)
+    warnings = []
+    for rec in levels:
+        assert rec.data is not None
+        hint = transient_periods(rec.data) if rec.data.P >= 3 else 0
+        if hint:
+            warnings.append(
+                f"level {rec.name}: the first {hint} kept period(s) differ from the last ones by "
+                "more than twice the noise (a transient, or slow drift); nothing dropped: use "
+                "--drop-periods K to drop leading periods"
+            )
+    quality = {
+        "clean": True,
+        "records": [
+            {
+                "level": rec.name,
+                "file": str(rec.path),
+                "samples": int(rec.data.u.size) if rec.data is not None else 0,
+                "periods_in_file": rec.periods_in_file,
+                "realizations": rec.data.M if rec.data is not None else 0,
+                "dropped_periods": rec.dropped_periods,
+            }
+            for rec in levels
+        ],
+    }
+    first = levels[0].data
+    assert first is not None
+    return Dataset(
+        first.fs,
+        list(levels),
+        quality=quality,
+        warnings=warnings,
+        source=source or ", ".join(str(r.path) for r in levels),
+    )

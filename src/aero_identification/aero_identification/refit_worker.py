@@ -97,18 +97,21 @@ def refit(
     Returns:
         (payload, summary): the /identification/model payload (pipeline's ``to_json_dict``)
         and {complete, warnings, levels: [{name, clusters: [k, sizes] | None, excluded}],
-        written (report files), data_quality (pipeline.data_quality), timings_s,
+        written (report files), data_quality (campaign_dataset.data_quality), timings_s,
         worker: {cpu_s, start_mb, peak_mb}}.
     """
-    from .pipeline import identify, write_report
+    from .campaign_dataset import campaign_dataset
+    from .pipeline import identify
+    from .report import write_report
 
     cpu0 = time.process_time()
     release_memory()  # what the previous job freed
     _reset_peak_rss()
     start_mb = status_mb("VmRSS")
     last = _kept.get("last")
+    dataset = campaign_dataset(assembler, final, config.min_periods)
     result = identify(
-        assembler,
+        dataset,
         config,
         final=final,
         models_from=last if reuse_models else None,
@@ -118,7 +121,7 @@ def refit(
     written: list[str] = []
     if out_dir and final:
         t0 = time.perf_counter()
-        written = [str(p) for p in write_report(result, assembler, out_dir).values()]
+        written = [str(p) for p in write_report(result, out_dir).values()]
         result.timings_s["report"] = time.perf_counter() - t0
     summary = {
         "complete": result.complete,

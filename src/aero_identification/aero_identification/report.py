@@ -1,12 +1,12 @@
-"""Reports of an identification run: the paper's Table 1 and its figures (Figs. 6–9).
+"""Reports of an identification run: the figures of the paper's Figs. 6–9 and `write_report`,
+the one report of every source (tables in tables.py).
 
 Figures use matplotlib's object-oriented API on an Agg canvas (no pyplot, no screen, no global
 backend switch), so they can be written from nodes and tests alike.
 """
 
-import csv
-import io
-from collections.abc import Mapping, Sequence
+import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -15,69 +15,11 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from aero_identification.bla import BLA
+from aero_identification.quality import data_quality_lines
+from aero_identification.results import IdentificationResult, bla_summary, modal_frequencies
+from aero_identification.tables import TABLE1_MODELS, clustering_markdown, table1
 
-TABLE1_MODELS = ("BLA FRF", "BLA SS", "PNLSS")
-
-
-def _column_name(level: str, freq: float) -> str:
-    return f"{level} {freq:g} Hz"
-
-
-def table1(
-    errors: Mapping[tuple[str, str, float], float],
-    levels: Sequence[str],
-    freqs: Sequence[float],
-    models: Sequence[str] = TABLE1_MODELS,
-    digits: int = 2,
-) -> tuple[str, str]:
-    """The paper's Table 1: relative RMS errors, rows = models, columns = levels × frequencies.
-
-    Args:
-        errors: {(model, level, freq_hz): relative RMS error}; missing cells are left blank
-            ("–" in Markdown, empty in CSV).
-        levels: excitation levels in column order, e.g. ["low", "medium", "high"].
-        freqs: sine frequencies [Hz] in column order within each level, e.g. [0.4, 1.0, 1.6].
-        models: row order.
-        digits: decimals in the Markdown table (the CSV keeps full precision).
-
-    Returns:
-        (markdown, csv_text). Columns: "model", then "<level> <freq> Hz" for each level, and
-        each frequency within it.
-
-    Raises:
-        ValueError: for a key whose model, level or frequency is not in the layout (a typo
-            would otherwise drop a result silently).
-    """
-    freqs_arr = np.asarray(freqs, dtype=float)
-    cells: dict[tuple[str, str, int], float] = {}
-    for (model, level, freq), value in errors.items():
-        match = np.flatnonzero(np.isclose(freqs_arr, float(freq), rtol=1e-9, atol=1e-12))
-        if model not in models or level not in levels or match.size != 1:
-            raise ValueError(
-                f"result key {(model, level, freq)} is not in the table layout (models "
-                f"{list(models)}, levels {list(levels)}, freqs {list(freqs)})"
-            )
-        cells[(model, level, int(match[0]))] = float(value)
-    header = ["model"] + [_column_name(lv, f) for lv in levels for f in freqs_arr]
-    rows_md: list[list[str]] = []
-    rows_csv: list[list[str]] = []
-    for model in models:
-        md, cs = [model], [model]
-        for level in levels:
-            for i in range(freqs_arr.size):
-                cell = cells.get((model, level, i))
-                md.append("–" if cell is None else f"{cell:.{digits}f}")
-                cs.append("" if cell is None else repr(cell))
-        rows_md.append(md)
-        rows_csv.append(cs)
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows_md]
-    markdown = "\n".join(lines) + "\n"
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(header)
-    writer.writerows(rows_csv)
-    return markdown, buffer.getvalue()
+__all__ = ["TABLE1_MODELS", "clustering_markdown", "table1"]
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
@@ -295,43 +237,169 @@ def plot_scan(scan: Any, path: str | Path, title: str = "PNLSS structure scan") 
     return _finish(fig, ax, path, "parameters", "validation error (relative RMS)", title)
 
 
-def clustering_markdown(effect: Mapping[str, Any]) -> str:
-    """clustering.md: what the period clustering changed, per level (pipeline.clustering_effect)."""
+# --- the report of an identification ------------------------------------------------------------
 
-    def num(value: Any, fmt: str) -> str:
-        return "–" if value is None or not np.isfinite(value) else format(value, fmt)
 
-    lines = [
-        "# What the period clustering changed",
-        "",
-        "The same pipeline with clustering (each level's dominant cluster) and without it (every",
-        "valid period; `table1_no_clustering.md`). BLA figures near 1.02 Hz as in the paper's",
-        "§3.3 (SNR, SNLR: |G|² against the noise and nonlinear variance of the BLA estimate);",
-        "var_nl, var_noise: mean over the excited lines of the nonlinear variance of one",
-        "realization's FRF and the noise variance of one period's FRF, relative to |G|² (so BLAs",
-        "from different numbers of periods compare); PNLSS (all levels): relative RMS",
-        "error on the validation realization's dominant-cluster periods (both models on the same",
-        "periods).",
-        "",
-        "| level | k | sizes | periods used (with / without) | SNR dB (with / without) "
-        "| SNLR dB | var_nl dB | var_noise dB | PNLSS validation error |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for name, e in effect.items():
-        w, wo = e.get("bla_with", {}), e.get("bla_without", {})
-
-        def pair(
-            key: str, fmt: str = ".1f", a: Mapping[str, Any] = w, b: Mapping[str, Any] = wo
-        ) -> str:
-            return f"{num(a.get(key), fmt)} / {num(b.get(key), fmt)}"
-
-        sizes = e.get("sizes")
-        lines.append(
-            f"| {name} | {e.get('k', '–')} | {sizes if sizes is not None else '–'} "
-            f"| {e.get('periods_used')} / {e.get('periods_used_without')} "
-            f"| {pair('snr_db')} | {pair('snlr_db')} | {pair('var_nl_db')} "
-            f"| {pair('var_noise_db')} "
-            f"| {num(e.get('pnlss_validation_with'), '.3f')} / "
-            f"{num(e.get('pnlss_validation_without'), '.3f')} |"
+def write_report(
+    result: IdentificationResult,
+    out_dir: str | Path,
+    quasi_static: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict[str, Path]:
+    """The one report of `pipeline.identify`, whatever the source: models.json, the tables
+    (Table 1 when there were sines, validation_errors when there were held-out levels; Markdown
+    and CSV), data_quality.md, summary.md, clustering.md (with the ablation), the structure
+    scan, and the figures of the paper's Figs. 6-9 (PNG)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+    path = out / "models.json"
+    path.write_text(json.dumps(result.to_json_dict(), indent=1, allow_nan=True))
+    written["models"] = path
+    for key, (markdown, csv_text) in result.tables().items():
+        (out / f"{key}.md").write_text(markdown)
+        (out / f"{key}.csv").write_text(csv_text)
+        written[key] = out / f"{key}.md"
+    path = out / "data_quality.md"
+    path.write_text(data_quality_markdown(result.data_quality))
+    written["data_quality"] = path
+    path = out / "summary.md"
+    path.write_text(summary_markdown(result))
+    written["summary"] = path
+    if result.scan is not None:
+        scan_md = (
+            "# PNLSS structure scan (all levels)\n\n"
+            "Validation error: relative RMS error on the held-out periods of the estimation "
+            f"levels ({result.pnlss_held_out}; docs/design.md §7.6).\n\n"
+            + result.scan.to_markdown()
         )
-    return "\n".join(lines) + "\n"
+        (out / "pnlss_scan.md").write_text(scan_md)
+        (out / "pnlss_scan.csv").write_text(result.scan.to_csv())
+        written["pnlss_scan"] = out / "pnlss_scan.md"
+        written["pnlss_scan_plot"] = plot_scan(result.scan, out / "pnlss_scan.png")
+    for lv in result.levels.values():
+        tag = lv.name.replace(" ", "_").replace("/", "_")
+        where = (
+            f"{lv.name} level ({lv.offset_deg:g}°)"
+            if lv.record.offset_deg is not None
+            else (f"level {lv.name}")
+        )
+        if lv.bla is not None:
+            written[f"frf_{tag}"] = plot_frf(lv.bla, out / f"frf_{tag}.png", f"BLA, {where}")
+            written[f"spectrum_{tag}"] = plot_output_spectrum(
+                lv.bla, out / f"output_spectrum_{tag}.png", f"Output spectrum, {where}"
+            )
+        if lv.clusters is not None and lv.record.data is not None:
+            written[f"clusters_{tag}"] = plot_clusters(
+                lv.clusters.labels,
+                out / f"clusters_{tag}.png",
+                y=lv.record.data.y,
+                fs=result.fs,
+                title=f"Clusters, {where} (k = {lv.clusters.k})",
+            )
+    if result.clustering_effect:
+        path = out / "clustering.md"
+        path.write_text(clustering_markdown(result.clustering_effect))
+        written["clustering"] = path
+    for pred in result.predictions:
+        tag = pred["name"].replace(" ", "_").replace(".", "p")
+        alpha = np.asarray(pred["alpha_deg"])
+        measured = np.asarray(pred["cl_measured"])
+        simulated = {
+            k[3:]: np.asarray(v)
+            for k, v in pred.items()
+            if k.startswith("cl_") and k != "cl_measured"
+        }
+        written[f"cl_alpha_{tag}"] = plot_cl_alpha(
+            alpha, measured, out / f"cl_alpha_{tag}.png", simulated, quasi_static, pred["name"]
+        )
+        t = np.arange(len(measured)) / result.fs
+        written[f"time_{tag}"] = plot_time_series(
+            t, measured, simulated, out / f"time_{tag}.png", title=pred["name"]
+        )
+    return written
+
+
+def data_quality_markdown(quality: Mapping[str, Any]) -> str:
+    """data_quality.md: every plan sample (streams) or every record (files) accounted for."""
+    text = ["# Data quality", ""]
+    text += [
+        f"- {name}: {c['received']} of {c['expected']} plan samples received once, "
+        f"{c['missing']} missing, {c['duplicated']} duplicated with another value, "
+        f"{c.get('redelivered', 0)} delivered twice with the same value (harmless), "
+        f"{c['outside_plan']} outside the plan"
+        for name, c in quality.get("samples", {}).items()
+    ]
+    text += [
+        f"- level {r['level']}, `{r['file']}`: {r['samples']} samples "
+        f"({r['periods_in_file']} periods × {r['realizations']} realization(s) read"
+        + (f", the first {r['dropped_periods']} period(s) dropped as asked" if r["dropped_periods"]
+           else "")
+        + "), every sample finite"
+        for r in quality.get("records", [])
+    ]  # fmt: skip
+    lines = data_quality_lines(dict(quality))
+    text += [
+        "",
+        "Clean: every plan sample arrived once; no anomaly; nothing excluded."
+        if not lines and quality.get("samples")
+        else "Clean: every record read whole; nothing excluded."
+        if not lines
+        else "**Not clean**:",
+        *[f"- {line}" for line in lines],
+    ]
+    return "\n".join(text).rstrip() + "\n"
+
+
+def summary_markdown(result: IdentificationResult) -> str:
+    """summary.md: data, BLA levels, linear orders, PNLSS, validation errors, warnings."""
+    lines = ["# Identification summary", "", f"Source: {result.source}", "", "## Levels", ""]
+    lines += [
+        "| level | role | operating point | input RMS | BLA method | M × P | periods used | "
+        "clusters | median \\|G\\| [dB] | median noise σ [dB] | median SNR [dB] | "
+        "median NL σ [dB] | linear order | modes [Hz] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for lv in result.levels.values():
+        rec = lv.record
+        op = "–" if rec.offset_deg is None else f"{rec.offset_deg:g}°"
+        row = [lv.name, lv.role, op, f"{rec.input_rms:.4g}"]
+        if lv.bla is None:
+            row += ["–"] * 10
+        else:
+            s = bla_summary(lv.bla)
+            nl = f"{s['nl_db']:.1f}" if "nl_db" in s else "not separable (M = 1)"
+            clusters = "–" if lv.clusters is None else f"k = {lv.clusters.k}"
+            order, modes = "–", "–"
+            if lv.linear is not None:
+                order = f"{lv.linear.order}" + (" (scan)" if lv.order_scanned else "")
+                modes = ", ".join(f"{f:.2f}" for f in modal_frequencies(lv.linear)) or "–"
+            row += [
+                lv.bla.method, f"{lv.bla.M} × {lv.bla.P}", str(lv.periods_used), clusters,
+                f"{s['G_db']:.1f}", f"{s['noise_db']:.1f}", f"{s['snr_db']:.1f}", nl, order,
+                modes,
+            ]  # fmt: skip
+        lines.append("| " + " | ".join(row) + " |")
+    lines += ["", "## PNLSS (all levels)", ""]
+    m = result.pnlss_all
+    if m is not None:
+        lines.append(
+            f"nx = {m.nx}, degrees {list(m.degrees)}, structure {m.structure}, "
+            f"{m.parameters.size} parameters, started from the linear model of level "
+            f"{result.pnlss_start_level}; iterate chosen on {result.pnlss_held_out}"
+            + (f"; structure chosen by the scan ({result.scan.rule})" if result.scan else "")
+            + "."
+        )
+    else:
+        lines.append("not fitted")
+    for key, (markdown, _) in result.tables().items():
+        title = {
+            "table1_all_levels": "Table 1, trained on all levels (relative RMS error on sines)",
+            "table1_level1": "Table 1, trained on level 1 (the paper's variant)",
+            "table1_no_clustering": "Table 1, all levels, without clustering",
+            "validation_errors": "Validation on held-out levels (relative RMS error)",
+            "validation_errors_no_clustering": "Held-out levels, without clustering",
+        }.get(key, key)
+        lines += ["", f"## {title}", "", markdown.rstrip()]
+    if result.warnings:
+        lines += ["", "## Warnings", ""] + [f"- {w}" for w in result.warnings]
+    return "\n".join(lines).rstrip() + "\n"

@@ -130,7 +130,6 @@ def test_parameters_convert_generically() -> None:
         ({"scan_equations": ["output"]}, "scan_equations"),
         ({"clustering": "yes"}, "clustering"),
         ({"max_order": 0}, "max_order"),
-        ({"validation_realization": 0}, "validation_realization"),
     ],
 )
 def test_invalid_values_name_their_parameter(values: dict[str, Any], name: str) -> None:

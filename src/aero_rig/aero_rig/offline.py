@@ -16,16 +16,16 @@ from pathlib import Path
 from typing import Any
 
 from aero_identification.campaign import CampaignAssembler
-from aero_identification.pipeline import (
-    IdentificationConfig,
-    IdentificationResult,
-    identify,
-    write_report,
-)
+from aero_identification.campaign_dataset import campaign_dataset
+from aero_identification.config import IdentificationConfig
+from aero_identification.pipeline import identify
+from aero_identification.report import write_report
+from aero_identification.results import IdentificationResult
 from rig_runtime.anomaly import Anomaly
 from rig_runtime.interface import (
     EXPERIMENT_ANOMALY,
     EXPERIMENT_PLAN,
+    IDENTIFICATION_MODEL,
     PITCH_JOINT,
     PITCH_STATE,
     WING_COEFFICIENTS,
@@ -46,6 +46,9 @@ class BagData:
     assembler: CampaignAssembler
     messages: int = 0
     warnings: list[str] = field(default_factory=list)
+    # The identifier's hyperparameters as the run used them (the "config" of the last
+    # /identification/model message in the bag), or None when the bag holds no model.
+    recorded_config: dict[str, Any] | None = None
 
 
 def read_campaign_bag(bag: str | Path) -> BagData:
@@ -86,6 +89,14 @@ def read_campaign_bag(bag: str | Path) -> BagData:
         if plan is None or "t0_ns" not in plan:
             raise BagError(f"bag {path}: /experiment/plan holds no plan with t0_ns")
         assembler = CampaignAssembler(plan, int(plan["t0_ns"]))
+        recorded_config = None
+        model_conns = [c for c in reader.connections if c.topic == IDENTIFICATION_MODEL.name]
+        for conn, _, raw in reader.messages(connections=model_conns):
+            model_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
+            try:
+                recorded_config = json.loads(model_msg.data).get("config") or recorded_config
+            except (ValueError, AttributeError):
+                warnings.append(f"bag {path}: an /identification/model message is not JSON")
         wanted = [
             c
             for c in reader.connections
@@ -115,7 +126,7 @@ def read_campaign_bag(bag: str | Path) -> BagData:
         reader.close()
         if view is not None:
             shutil.rmtree(view.parent, ignore_errors=True)
-    return BagData(plan, assembler, count, warnings)
+    return BagData(plan, assembler, count, warnings, recorded_config)
 
 
 def _recovered_view(path: Path, exc: Exception) -> tuple[Path | None, str]:
@@ -147,11 +158,28 @@ def _recovered_view(path: Path, exc: Exception) -> tuple[Path | None, str]:
 
 
 def fit_bag(
-    bag: str | Path, out_dir: str | Path | None = None, config: IdentificationConfig | None = None
+    bag: str | Path,
+    out_dir: str | Path | None = None,
+    config: IdentificationConfig | None = None,
+    data: BagData | None = None,
 ) -> tuple[IdentificationResult, BagData]:
-    data = read_campaign_bag(bag)
-    result = identify(data.assembler, config or IdentificationConfig(), final=True)
+    """The final identification of a campaign bag (the identifier's pipeline on the same
+    dataset). ``config``: default the hyperparameters recorded in the bag
+    (`BagData.recorded_config`), else IdentificationConfig()."""
+    data = data or read_campaign_bag(bag)
+    if config is None:
+        config = recorded_config(data)
+    dataset = campaign_dataset(data.assembler, final=True, min_periods=config.min_periods,
+                               source=f"bag {Path(bag)}")  # fmt: skip
+    result = identify(dataset, config, final=True)
     result.warnings[:0] = data.warnings
     if out_dir is not None:
-        write_report(result, data.assembler, out_dir)
+        write_report(result, out_dir)
     return result, data
+
+
+def recorded_config(data: BagData) -> IdentificationConfig:
+    """The hyperparameters the run used (from the bag), or the defaults when it has none."""
+    if data.recorded_config is None:
+        return IdentificationConfig()
+    return IdentificationConfig.from_dict(data.recorded_config)

@@ -1,0 +1,131 @@
+"""The campaign-stream source: a `CampaignAssembler` (the identifier node's, or one rebuilt from
+a bag by `aero_rig.offline`) as a `Dataset`, with its data-quality account.
+
+Per level: the latest ``count`` valid periods of every realization, ``count`` the smallest
+number of valid periods among them (the nonparametric methods need equal P); a period with a
+missing, duplicated or non-finite sample, or touched by an anomaly, is excluded and named
+(docs/design.md §1.2, step 1). Sine records: the complete, valid ones; a record that has
+started (or that an anomaly touched) and is not valid is excluded and named, except while it is
+still streaming before the final identification.
+"""
+
+from typing import Any
+
+import numpy as np
+
+from .campaign import CampaignAssembler, PeriodBlock
+from .data import PeriodicData
+from .dataset import Dataset, LevelRecord, SineData
+
+LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
+
+
+def level_names(plan_levels: list[int], offsets: dict[int, float]) -> dict[int, str]:
+    """Plan level number -> "low", "medium", "high" by offset (or "level k" beyond three)."""
+    levels = sorted(plan_levels, key=lambda lv: offsets.get(lv, 0.0))
+    names = LEVEL_NAMES.get(len(levels), [f"level {i + 1}" for i in range(len(levels))])
+    return {lv: names[i] for i, lv in enumerate(levels)}
+
+
+def _valid_periods(block: PeriodBlock) -> np.ndarray:
+    return np.flatnonzero(block.period_valid())
+
+
+def _excited_lines(assembler: CampaignAssembler, level: int, realization: int) -> np.ndarray:
+    lv = next(x for x in assembler.plan["levels"] if x["level"] == level)
+    return np.asarray(lv["realizations"][realization]["excited_lines"], dtype=int)
+
+
+def campaign_dataset(
+    assembler: CampaignAssembler, final: bool, min_periods: int = 2, source: str = ""
+) -> Dataset:
+    """What the assembler holds so far, as a Dataset (partial before the final call).
+
+    A level's ``data`` is None until every realization has ``min_periods`` valid periods.
+    """
+    offsets: dict[int, float] = {}
+    realizations: dict[int, list[int]] = {}
+    for lv, m in sorted(assembler.blocks):
+        offsets.setdefault(lv, assembler.blocks[(lv, m)].offset_deg)
+        realizations.setdefault(lv, []).append(m)
+    plan_levels = [int(x["level"]) for x in assembler.plan["levels"]]
+    names = level_names(plan_levels, offsets)
+    levels: list[LevelRecord] = []
+    for level in sorted(plan_levels, key=lambda lv: offsets.get(lv, 0.0)):
+        blocks = [assembler.blocks[(level, m)] for m in realizations.get(level, [])]
+        excluded = [
+            f"realization {b.realization} period {p}: {problem}"
+            for b in blocks
+            for p in range(b.P)
+            if (problem := b.period_problem(p)) and np.any(b.count_u[:, p] + b.count_y[:, p])
+        ]
+        counts = [len(_valid_periods(b)) for b in blocks]
+        data = None
+        if len(blocks) >= 2 and min(counts) >= min_periods:
+            count = min(counts)
+            cols = [_valid_periods(b)[-count:] for b in blocks]
+            data = PeriodicData(
+                np.stack([b.u[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
+                np.stack([b.y[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
+                assembler.fs,
+                _excited_lines(assembler, level, blocks[0].realization),
+                period_index=np.stack(cols, axis=1),
+                realization_index=np.array([b.realization for b in blocks]),
+            )
+        levels.append(
+            LevelRecord(
+                names[level],
+                data,
+                key=str(level),
+                offset_deg=offsets.get(level, 0.0),
+                periods_in_file=blocks[0].P if blocks else 0,
+                excluded=tuple(excluded),
+            )
+        )
+    dataset = Dataset(
+        assembler.fs,
+        levels,
+        sines_planned=bool(assembler.sines),
+        source=source or "campaign stream",
+    )
+    for rec in sorted(assembler.sines.values(), key=lambda r: r.index):
+        if rec.valid():
+            dataset.sines.append(
+                SineData(
+                    rec.name,
+                    rec.frequency_hz,
+                    rec.offset_deg,
+                    rec.samples_per_period,
+                    rec.u.copy(),
+                    rec.y.copy(),
+                )
+            )
+            continue
+        # Still streaming (its last sample not in yet) is no fault until the final refit.
+        in_progress = not (rec.count_u[-1] and rec.count_y[-1])
+        started = np.any(rec.count_u) or np.any(rec.count_y)
+        if (started or rec.mark) and (final or not in_progress):
+            dataset.excluded_sines.append(f"{rec.name}: {rec.problem()}")
+            dataset.warnings.append(f"{rec.name}: not used for validation ({rec.problem()})")
+    dataset.quality = data_quality(assembler, dataset, final)
+    return dataset
+
+
+def data_quality(assembler: CampaignAssembler, dataset: Dataset, final: bool) -> dict[str, Any]:
+    """What the identification could not use, and why: every plan sample accounted for on both
+    channels, the anomalies that touch the plan, the excluded periods and sine records.
+
+    ``clean`` is false as soon as any of these is not empty: such a run says so in its
+    report, its status and the campaign's exit code.
+    """
+    samples = assembler.sample_accounting(final=final)
+    anomalies = assembler.plan_anomalies()
+    periods = [f"{lv.name}: {text}" for lv in dataset.levels for text in lv.excluded]
+    lost = sum(c["missing"] + c["duplicated"] for c in samples.values())
+    return {
+        "clean": not (lost or anomalies or periods or dataset.excluded_sines),
+        "samples": samples,
+        "anomalies": anomalies,
+        "excluded_periods": periods,
+        "excluded_sines": list(dataset.excluded_sines),
+    }

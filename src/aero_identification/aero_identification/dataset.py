@@ -1,0 +1,136 @@
+"""The one input of the identification pipeline, whatever door the data came in by.
+
+A source adapter turns its data into a `Dataset` (docs/design.md §7.1):
+
+- a campaign stream (the identifier node's `CampaignAssembler`, or a bag read back into one):
+  `campaign_dataset.campaign_dataset`;
+- measured CSV/MAT records: `records.read_dataset`.
+
+`pipeline.identify(dataset, config)` then runs every stage that the data allow, and
+`report.write_report` writes one report for all of them.
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aero_identification.data import PeriodicData
+
+
+@dataclass(frozen=True, eq=False)
+class LevelRecord:
+    """One excitation level: its steady-state periods and where they came from.
+
+    Attributes:
+        name: the level's short name ("low", "medium", "high" in a campaign; "3" for a file
+            named ``..._Level3.csv``).
+        data: the usable periods (N, P, M), or None while a stream has too few of them.
+        key: the level's key in ``models.json`` (the plan's level number in a campaign, the
+            name for records).
+        offset_deg: the operating point (plan offset) when the source knows it, else None.
+        path: the file it was read from (records), else None.
+        periods_in_file: P before any requested drop (records; P otherwise).
+        dropped_periods: leading periods dropped on request (records).
+        excluded: periods left out, each with its reason ("realization 1 period 3: ...").
+        notes: what the adapter did (layout, fs source, excited lines), for the report.
+    """
+
+    name: str
+    data: PeriodicData | None
+    key: str = ""
+    offset_deg: float | None = None
+    path: Path | None = None
+    periods_in_file: int = 0
+    dropped_periods: int = 0
+    excluded: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+
+    @property
+    def input_rms(self) -> float:
+        """RMS of the input around its mean, over the usable periods (nan without data)."""
+        return float(np.std(self.data.u)) if self.data is not None else float("nan")
+
+    @property
+    def label(self) -> str:
+        """Key in models.json and the report's file names."""
+        return self.key or self.name
+
+
+@dataclass(frozen=True, eq=False)
+class SineData:
+    """The measured steady-state periods of one single-sine test (validation data)."""
+
+    name: str
+    frequency_hz: float
+    offset_deg: float
+    samples_per_period: int
+    u: np.ndarray  # (n,) input [deg]
+    y: np.ndarray  # (n,) output
+
+
+@dataclass
+class Dataset:
+    """Levels (lowest first), validation sines and the data-quality account of one source.
+
+    Attributes:
+        fs: sampling frequency [Hz].
+        levels: every level, ordered from the lowest: by plan offset in a campaign, by input
+            RMS for records (`lowest` is the level whose linear model starts the PNLSS fit).
+        sines: valid single-sine records (empty for records).
+        sines_planned: the source plans sine records (a campaign), so the level-1 models of
+            Table 1's paper variant are fitted even before the first sine arrives.
+        quality: the data-quality account (campaign_dataset.data_quality, or the records'
+            reading account); ``clean`` false when anything was lost or excluded.
+        excluded_sines: sine records left out, each with its reason.
+        warnings: what the adapter noticed (a transient, a sine not used), for the report.
+        source: one line naming the source (a bag, a directory of CSV files, a live stream).
+        realizations: which realization of the source each of ``data``'s M columns is
+            (a campaign: (estimation, validation)); () when it is 0 … M-1.
+    """
+
+    fs: float
+    levels: list[LevelRecord]
+    sines: list[SineData] = field(default_factory=list)
+    sines_planned: bool = False
+    quality: dict[str, Any] = field(default_factory=dict)
+    excluded_sines: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    source: str = ""
+
+    @property
+    def clean(self) -> bool:
+        return bool(self.quality.get("clean", True))
+
+    def level(self, name: str) -> LevelRecord:
+        for lv in self.levels:
+            if lv.name == name:
+                return lv
+        raise KeyError(name)
+
+    def select(self, tokens: list[str] | tuple[str, ...]) -> list[str]:
+        """Names of the levels a user's selectors name (level name, key, file stem or glob);
+        ValueError naming the selector that matches nothing."""
+        import fnmatch
+
+        out: list[str] = []
+        names = [lv.name for lv in self.levels]
+        for token in tokens:
+            hit = [
+                lv.name
+                for lv in self.levels
+                if any(
+                    token == n or fnmatch.fnmatchcase(n, token)
+                    for n in (
+                        lv.name,
+                        lv.key,
+                        *((lv.path.stem, lv.path.name) if lv.path is not None else ()),
+                    )
+                    if n
+                )
+            ]
+            if not hit:
+                raise ValueError(f"level {token!r} matches no level; levels: {names}")
+            out += [h for h in hit if h not in out]
+        return out

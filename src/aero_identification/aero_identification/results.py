@@ -1,0 +1,251 @@
+"""The result of `pipeline.identify`, whatever the source, and its JSON payload
+(``/identification/model``, ``models.json``)."""
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .bla import BLA
+from .clustering import ClusterResult
+from .config import IdentificationConfig
+from .dataset import LevelRecord
+from .models import LinearStateSpace, PNLSSModel
+from .quality import data_quality_note
+from .scan import ScanResult
+from .tables import held_out_table, table1
+
+
+@dataclass
+class LevelResult:
+    """One level's clustering, BLA and linear state-space model."""
+
+    record: LevelRecord
+    role: str = "estimation"  # or "held out": BLA only, used for validation errors
+    clusters: ClusterResult | None = None
+    bla: BLA | None = None
+    linear: LinearStateSpace | None = None
+    order_scanned: bool = False  # the linear order came from the subspace order scan
+    periods_used: int = 0
+
+    @property
+    def name(self) -> str:
+        return self.record.name
+
+    @property
+    def offset_deg(self) -> float:
+        off = self.record.offset_deg
+        return float(off) if off is not None else float("nan")
+
+    @property
+    def excluded(self) -> list[str]:
+        return list(self.record.excluded)
+
+
+@dataclass
+class IdentificationResult:
+    config: IdentificationConfig
+    fs: float
+    levels: dict[str, LevelResult] = field(default_factory=dict)  # by name, lowest first
+    pnlss_all: PNLSSModel | None = None
+    pnlss_level1: PNLSSModel | None = None
+    linear_level1: LinearStateSpace | None = None
+    pnlss_start_level: str = ""  # the level whose linear model started the PNLSS fits
+    pnlss_held_out: str = ""  # what chose the PNLSS iterate (pipeline.pnlss_sets)
+    errors_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    errors_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    held_out_errors: list[dict[str, Any]] = field(default_factory=list)
+    predictions: list[dict[str, Any]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    timings_s: dict[str, float] = field(default_factory=dict)
+    complete: bool = False
+    level1_signature: bytes = b""  # which level-1 periods the level-1 PNLSS was trained on
+    excluded_sines: list[str] = field(default_factory=list)
+    data_quality: dict[str, Any] = field(default_factory=dict)  # the dataset's account
+    source: str = ""
+    sines_planned: bool = False  # the source plans sine records: Table 1 is part of the result
+    scan: ScanResult | None = None  # the structure scan of the all-levels PNLSS (config.scan)
+    # The same pipeline without clustering (config.clustering_ablation, final only) and what
+    # clustering changed (pipeline.clustering_effect()).
+    no_clustering: "IdentificationResult | None" = None
+    clustering_effect: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def clean(self) -> bool:
+        return bool(self.data_quality.get("clean", True))
+
+    @property
+    def level_names(self) -> list[str]:
+        """Names of the levels with sines or models, lowest first (Table 1's columns)."""
+        return [r.name for r in self.levels.values() if r.role == "estimation"]
+
+    @property
+    def sine_freqs(self) -> list[float]:
+        return sorted({round(k[2], 6) for k in (*self.errors_all, *self.errors_level1)})
+
+    def tables(self) -> dict[str, tuple[str, str]]:
+        """Table 1 (both variants, and without clustering) when there were sines; the
+        held-out levels' errors when there were held-out levels. A "Data not clean" note is on
+        top of each when anything was lost or excluded."""
+        levels, freqs = self.level_names, self.sine_freqs
+        tables: dict[str, tuple[str, str]] = {}
+        if self.sines_planned or freqs:
+            tables["table1_all_levels"] = table1(self.errors_all, levels, freqs)
+            tables["table1_level1"] = table1(self.errors_level1, levels, freqs)
+            if self.no_clustering is not None:
+                tables["table1_no_clustering"] = table1(
+                    self.no_clustering.errors_all, levels, freqs
+                )
+        if self.held_out_errors:
+            tables["validation_errors"] = held_out_table(self.held_out_errors)
+            if self.no_clustering is not None and self.no_clustering.held_out_errors:
+                tables["validation_errors_no_clustering"] = held_out_table(
+                    self.no_clustering.held_out_errors
+                )
+        if self.clean:
+            return tables
+        # Never a clean-looking table from data that lost or excluded samples.
+        note = data_quality_note(self.data_quality)
+        return {key: (note + md, csv) for key, (md, csv) in tables.items()}
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The /identification/model payload (also models.json in the run directory)."""
+        tables = self.tables()
+
+        def markdown(key: str) -> str | None:
+            return tables[key][0] if key in tables else None
+
+        return {
+            "complete": self.complete,
+            "source": self.source,
+            "config": config_dict(self.config),
+            "levels": {lv.record.label: level_json(lv) for lv in self.levels.values()},
+            "models": {
+                "pnlss_all_levels": self.pnlss_all.to_dict() if self.pnlss_all else None,
+                "pnlss_level1": self.pnlss_level1.to_dict() if self.pnlss_level1 else None,
+                "bla_ss_level1": self.linear_level1.to_dict() if self.linear_level1 else None,
+            },
+            "pnlss": {
+                "initial_linear_level": self.pnlss_start_level,
+                "held_out": self.pnlss_held_out,
+            },
+            "errors": {
+                "all_levels": [[m, lv, f, e] for (m, lv, f), e in self.errors_all.items()],
+                "level1": [[m, lv, f, e] for (m, lv, f), e in self.errors_level1.items()],
+                "held_out_levels": self.held_out_errors,
+            },
+            "table1": {
+                "markdown": markdown("table1_all_levels"),
+                "markdown_level1": markdown("table1_level1"),
+                "markdown_no_clustering": markdown("table1_no_clustering"),
+                "markdown_held_out": markdown("validation_errors"),
+            },
+            "clustering_effect": self.clustering_effect,
+            "predictions": [_trim_prediction(p) for p in self.predictions],
+            "warnings": self.warnings,
+            "data_quality": self.data_quality,
+            "timings_s": self.timings_s,
+            "pnlss_scan": None
+            if self.scan is None
+            else {
+                "table": self.scan.table,
+                "rule": self.scan.rule,
+                "seconds": self.scan.seconds,
+                "workers": self.scan.workers,
+            },
+        }
+
+
+def config_dict(config: IdentificationConfig) -> dict[str, Any]:
+    """The hyperparameters as JSON (tuples as lists): recorded so that a fit can be repeated
+    with the parameters the run used."""
+    to_dict = getattr(config, "to_dict", None)
+    if callable(to_dict):
+        return dict(to_dict())
+
+    def plain(v: Any) -> Any:
+        return [plain(x) for x in v] if isinstance(v, tuple | list) else v
+
+    return {k: plain(v) for k, v in dataclasses.asdict(config).items()}
+
+
+def bla_summary(bla: BLA) -> dict[str, float]:
+    """Median levels over the excited lines [dB]: |G|, noise σ and (M ≥ 2) distortion σ."""
+
+    def db_var(v: np.ndarray) -> float:
+        m = float(np.median(v))
+        return 10 * math.log10(m) if m > 0 else -math.inf
+
+    out = {
+        "G_db": float(20 * np.log10(np.median(np.abs(bla.G)))),
+        "noise_db": db_var(bla.var_noise),
+        "snr_db": float(10 * np.log10(np.median(bla.snr))),
+    }
+    if bla.M >= 2:
+        out["nl_db"] = db_var(bla.var_nl)
+        out["total_db"] = db_var(bla.var_total)
+    return out
+
+
+def modal_frequencies(model: LinearStateSpace) -> list[float]:
+    """Natural frequencies [Hz] of the model's complex pole pairs, ascending."""
+    p = model.poles()
+    p = p[np.imag(p) > 0]
+    return sorted(float(f) for f in np.abs(np.log(p)) * model.fs / (2 * math.pi))
+
+
+def level_json(lv: LevelResult) -> dict[str, Any]:
+    rec = lv.record
+    entry: dict[str, Any] = {"name": lv.name, "offset_deg": rec.offset_deg, "role": lv.role}
+    entry["periods_used"] = lv.periods_used
+    entry["excluded_periods"] = lv.excluded
+    if rec.data is not None:
+        entry.update(N=rec.data.N, P=rec.data.P, M=rec.data.M, input_rms=rec.input_rms)
+    entry["periods_in_file"] = rec.periods_in_file
+    entry["dropped_periods"] = rec.dropped_periods
+    if rec.path is not None:
+        entry["file"] = str(rec.path)
+    if rec.notes:
+        entry["notes"] = list(rec.notes)
+    if lv.bla is not None:
+        entry["bla"] = {
+            "method": lv.bla.method,
+            "freq_hz": lv.bla.freq.tolist(),
+            "G_re": lv.bla.G.real.tolist(),
+            "G_im": lv.bla.G.imag.tolist(),
+            "var_noise": lv.bla.var_noise.tolist(),
+            "var_total": lv.bla.var_total.tolist(),
+            "var_nl": lv.bla.var_nl.tolist(),
+            "summary_db": bla_summary(lv.bla),
+        }
+    if lv.clusters is not None:
+        entry["clusters"] = {
+            "labels": lv.clusters.labels.tolist(),
+            "k": int(lv.clusters.k),
+            "dominant": int(lv.clusters.dominant),
+            "sizes": [int(s) for s in lv.clusters.sizes],
+            "silhouette": {str(k): v for k, v in lv.clusters.silhouette.items()},
+        }
+    if lv.linear is not None:
+        entry["bla_ss"] = lv.linear.to_dict()
+        entry["bla_ss"]["order_scanned"] = lv.order_scanned
+        entry["bla_ss"]["modal_frequencies_hz"] = modal_frequencies(lv.linear)
+    return entry
+
+
+PAYLOAD_PERIODS = 2  # sine periods per prediction in the published model (C_l-alpha loops)
+
+
+def _trim_prediction(pred: dict[str, Any]) -> dict[str, Any]:
+    """The last PAYLOAD_PERIODS periods of a prediction, 5 decimals: the /identification/model
+    payload stays small (the full records go to the report's figures)."""
+    n = PAYLOAD_PERIODS * int(pred.get("samples_per_period", 0))
+    out: dict[str, Any] = {}
+    for key, value in pred.items():
+        if isinstance(value, list) and n:
+            out[key] = [round(float(v), 5) for v in value[-n:]]
+        else:
+            out[key] = value
+    return out

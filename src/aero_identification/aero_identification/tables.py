@@ -1,0 +1,151 @@
+"""The tables of an identification report, as (Markdown, CSV): the paper's Table 1, the
+validation errors on held-out levels, and what the period clustering changed.
+
+Light (numpy only): the result's JSON payload and the command line use them without loading
+matplotlib.
+"""
+
+import csv
+import io
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+TABLE1_MODELS = ("BLA FRF", "BLA SS", "PNLSS")
+
+
+def _column_name(level: str, freq: float) -> str:
+    return f"{level} {freq:g} Hz"
+
+
+def table1(
+    errors: Mapping[tuple[str, str, float], float],
+    levels: Sequence[str],
+    freqs: Sequence[float],
+    models: Sequence[str] = TABLE1_MODELS,
+    digits: int = 2,
+) -> tuple[str, str]:
+    """The paper's Table 1: relative RMS errors, rows = models, columns = levels × frequencies.
+
+    Args:
+        errors: {(model, level, freq_hz): relative RMS error}; missing cells are left blank
+            ("–" in Markdown, empty in CSV).
+        levels: excitation levels in column order, e.g. ["low", "medium", "high"].
+        freqs: sine frequencies [Hz] in column order within each level, e.g. [0.4, 1.0, 1.6].
+        models: row order.
+        digits: decimals in the Markdown table (the CSV keeps full precision).
+
+    Returns:
+        (markdown, csv_text). Columns: "model", then "<level> <freq> Hz" for each level, and
+        each frequency within it.
+
+    Raises:
+        ValueError: for a key whose model, level or frequency is not in the layout (a typo
+            would otherwise drop a result silently).
+    """
+    freqs_arr = np.asarray(freqs, dtype=float)
+    cells: dict[tuple[str, str, int], float] = {}
+    for (model, level, freq), value in errors.items():
+        match = np.flatnonzero(np.isclose(freqs_arr, float(freq), rtol=1e-9, atol=1e-12))
+        if model not in models or level not in levels or match.size != 1:
+            raise ValueError(
+                f"result key {(model, level, freq)} is not in the table layout (models "
+                f"{list(models)}, levels {list(levels)}, freqs {list(freqs)})"
+            )
+        cells[(model, level, int(match[0]))] = float(value)
+    header = ["model"] + [_column_name(lv, f) for lv in levels for f in freqs_arr]
+    rows_md: list[list[str]] = []
+    rows_csv: list[list[str]] = []
+    for model in models:
+        md, cs = [model], [model]
+        for level in levels:
+            for i in range(freqs_arr.size):
+                cell = cells.get((model, level, i))
+                md.append("–" if cell is None else f"{cell:.{digits}f}")
+                cs.append("" if cell is None else repr(cell))
+        rows_md.append(md)
+        rows_csv.append(cs)
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows_md]
+    markdown = "\n".join(lines) + "\n"
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows_csv)
+    return markdown, buffer.getvalue()
+
+
+def clustering_markdown(effect: Mapping[str, Any]) -> str:
+    """clustering.md: what the period clustering changed, per level (pipeline.clustering_effect)."""
+
+    def num(value: Any, fmt: str) -> str:
+        return "–" if value is None or not np.isfinite(value) else format(value, fmt)
+
+    lines = [
+        "# What the period clustering changed",
+        "",
+        "The same pipeline with clustering (each level's dominant cluster) and without it (every",
+        "valid period; `table1_no_clustering.md`). BLA figures near 1.02 Hz as in the paper's",
+        "§3.3 (SNR, SNLR: |G|² against the noise and nonlinear variance of the BLA estimate);",
+        "var_nl, var_noise: mean over the excited lines of the nonlinear variance of one",
+        "realization's FRF and the noise variance of one period's FRF, relative to |G|² (so BLAs",
+        "from different numbers of periods compare); PNLSS (all levels): relative RMS",
+        "error on the validation realization's dominant-cluster periods (both models on the same",
+        "periods).",
+        "",
+        "| level | k | sizes | periods used (with / without) | SNR dB (with / without) "
+        "| SNLR dB | var_nl dB | var_noise dB | PNLSS validation error |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, e in effect.items():
+        w, wo = e.get("bla_with", {}), e.get("bla_without", {})
+
+        def pair(
+            key: str, fmt: str = ".1f", a: Mapping[str, Any] = w, b: Mapping[str, Any] = wo
+        ) -> str:
+            return f"{num(a.get(key), fmt)} / {num(b.get(key), fmt)}"
+
+        sizes = e.get("sizes")
+        lines.append(
+            f"| {name} | {e.get('k', '–')} | {sizes if sizes is not None else '–'} "
+            f"| {e.get('periods_used')} / {e.get('periods_used_without')} "
+            f"| {pair('snr_db')} | {pair('snlr_db')} | {pair('var_nl_db')} "
+            f"| {pair('var_noise_db')} "
+            f"| {num(e.get('pnlss_validation_with'), '.3f')} / "
+            f"{num(e.get('pnlss_validation_without'), '.3f')} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+HELD_OUT_COLUMNS = (
+    ("level", "held-out level"),
+    ("input_rms", "input RMS"),
+    ("nearest_estimation_level", "nearest estimation level"),
+    ("linear_nearest", "linear SS (nearest level)"),
+    ("linear_lowest", "linear SS (lowest level)"),
+    ("pnlss", "PNLSS"),
+)
+
+
+def held_out_table(rows: Sequence[Mapping[str, Any]], digits: int = 3) -> tuple[str, str]:
+    """Validation errors on held-out levels (relative RMS error), one row per level, as
+    (Markdown, CSV); a model that was not fitted is "–" (empty in CSV)."""
+    header = [title for _, title in HELD_OUT_COLUMNS]
+    md = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow([key for key, _ in HELD_OUT_COLUMNS])
+    for row in rows:
+        cells = []
+        for key, _ in HELD_OUT_COLUMNS:
+            v = row[key]
+            if v is None:
+                cells.append("–")
+            elif isinstance(v, float):
+                cells.append(f"{v:.{digits}f}" if key != "input_rms" else f"{v:.4g}")
+            else:
+                cells.append(str(v))
+        md.append("| " + " | ".join(cells) + " |")
+        writer.writerow(["" if row[k] is None else row[k] for k, _ in HELD_OUT_COLUMNS])
+    return "\n".join(md) + "\n", buffer.getvalue()
