@@ -32,7 +32,8 @@ import numpy as np
 import psutil
 from rosbags.highlevel import AnyReader
 
-from aero_rig.cli import CampaignMonitor, _config
+from aero_rig.cli.common import config_path
+from aero_rig.cli.monitor import CampaignMonitor
 from rig_runtime.graph import load_graph
 from rig_runtime.interface import PITCH_COMMAND, WING_COEFFICIENTS
 from rig_runtime.launcher import Launcher
@@ -67,7 +68,7 @@ def _sample_processes(
 
 
 def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
-    graph = load_graph(_config("sim.yaml"))
+    graph = load_graph(config_path("sim.yaml"))
     overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": plan, "real_time_factor": 0.0},
         "recorder": {"output": str(run_dir / "bag")},
@@ -138,7 +139,7 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
 def latency(seconds: float, run_dir: Path) -> dict[str, Any]:
     from rig_runtime.node import Node
 
-    graph = load_graph(_config("sim.yaml"))
+    graph = load_graph(config_path("sim.yaml"))
     keep = {"generator", "sim_actuator", "sim_wing", "lift"}
     graph = type(graph)(graph.name, tuple(n for n in graph.nodes if n.name in keep), graph.source)
     overrides = {"generator": {"plan": "short", "real_time_factor": 1.0}}

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from aero_rig.cli import _config
+from aero_rig.cli.common import config_path
 from rig_runtime.graph import load_graph
 from rig_runtime.launcher import Launcher
 from rig_runtime.ros_environment import rclpy_available
@@ -45,7 +45,7 @@ def node_list(env: dict[str, str], *extra: str) -> list[str]:
 
 def measure(backend: str, tries: int, run_dir: Path) -> dict[str, Any]:
     env = graph_env(unique_domain_id(), RIG_RUNTIME_BACKEND=backend)
-    graph = load_graph(_config("sim.yaml"))
+    graph = load_graph(config_path("sim.yaml"))
     overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": "default", "real_time_factor": 1.0},
         "identifier": {"output_dir": str(run_dir), "use_worker": False, "scan": False},

@@ -10,7 +10,7 @@ package_name = "aero_rig"
 setup(
     name=package_name,
     version="0.1.0",
-    packages=[package_name, package_name + ".view"],
+    packages=[package_name, package_name + ".cli", package_name + ".view"],
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

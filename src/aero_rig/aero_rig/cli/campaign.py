@@ -1,0 +1,262 @@
+"""``aero-rig campaign``: the simulated campaign end to end.
+
+Launches the simulated graph (generator, simulated actuator, simulated wing, lift, identifier,
+recorder, optionally the Rerun view) as processes, runs the plan to its end, waits for the
+final identification, stops everything and prints Table 1 and the run directory (bag, models,
+report, .rrd). A run that lost or excluded data lists what on its last lines and exits with
+code 3 unless ``--allow-excluded``.
+"""
+
+import argparse
+import json
+import os
+import signal
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rig_runtime import ros_environment
+from rig_runtime.graph import GraphError, load_graph
+from rig_runtime.launcher import Launcher, parse_overrides
+
+from ..verdict import run_problems
+from .common import (
+    EXIT_FAILED,
+    EXIT_NOT_CLEAN,
+    EXIT_OK,
+    EXIT_USAGE,
+    VIEW_MODES,
+    add_backend_option,
+    add_override_option,
+    backend_label,
+    checked_backend,
+    config_path,
+    merge_overrides,
+    new_run_dir,
+    parse_node_backends,
+    with_view,
+)
+from .monitor import CampaignMonitor
+
+MAX_LISTED_PROBLEMS = 40  # more are in the run's data_quality.md
+
+
+@dataclass
+class Outcome:
+    """How the launch-and-monitor loop ended."""
+
+    reason: str | None  # what ended it: the launcher's poll, a timeout, "interrupted"
+    codes: dict[str, int]  # exit code per node
+    wall: float  # wall seconds from start to stop
+    total: int  # plan samples (0: the plan was never seen)
+    fs: float  # the plan's sample rate [Hz]
+
+
+def add_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser("campaign", help="run the simulated campaign end to end")
+    p.add_argument("--plan", default="default", help="default | short | plan JSON file")
+    p.add_argument("--seed", type=int, default=0, help="plan seed (phases, detection lines)")
+    p.add_argument(
+        "--real-time-factor",
+        type=float,
+        default=0.0,
+        help="experiment s per wall s; 0 = as fast as the graph takes (default)",
+    )
+    p.add_argument("--out", default=None, help="run directory (default runs/<date-time>)")
+    p.add_argument("--rerun", choices=VIEW_MODES, default="off", help="live Rerun view")
+    p.add_argument("--graph", default=None, help="graph YAML (default aero_rig config/sim.yaml)")
+    p.add_argument("--timeout", type=float, default=0.0, help="give up after S wall seconds")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--allow-excluded",
+        action="store_true",
+        help="exit 0 even if data were lost or excluded (they are still listed)",
+    )
+    add_backend_option(p)
+    add_override_option(p)
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    backend = checked_backend()
+    user_overrides = parse_overrides(args.overrides)
+    graph = load_graph(Path(args.graph) if args.graph else config_path("sim.yaml"))
+    run_dir = new_run_dir(args.out)
+    rrd = run_dir / "campaign.rrd" if args.rerun == "save" else None
+    graph = with_view(graph, args.rerun, rrd)
+    overrides = merge_overrides(campaign_overrides(args, run_dir), user_overrides)
+    env = use_backend(backend)
+    print(
+        f"aero-rig: campaign '{args.plan}' on {backend_label(backend)} -> {run_dir}",
+        file=sys.stderr,
+    )
+    try:
+        launcher = Launcher(
+            graph,
+            env=env,
+            overrides=overrides,
+            log_dir=run_dir / "logs",
+            backends=parse_node_backends(args.node_backend),
+        )
+    except (KeyError, GraphError) as exc:
+        print(f"aero-rig: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    outcome = launch_and_monitor(launcher, timeout=args.timeout, quiet=args.quiet)
+    if launcher.failure:
+        print(f"aero-rig: campaign failed: {launcher.failure}", file=sys.stderr)
+        print(
+            f"aero-rig: node logs in {run_dir / 'logs'}; the bag so far: {run_dir / 'bag'}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED
+    return summarise(run_dir, backend, outcome, allow_excluded=args.allow_excluded)
+
+
+def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dict[str, Any]]:
+    """The parameters the campaign sets: the plan for the generator, outputs into ``run_dir``."""
+    plan = args.plan
+    if plan not in ("default", "short"):
+        plan = str(Path(plan).resolve())
+    return {
+        "generator": {
+            "plan": plan,
+            "seed": args.seed,
+            "real_time_factor": args.real_time_factor,
+        },
+        "recorder": {"output": str(run_dir / "bag")},
+        "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
+    }
+
+
+def use_backend(backend: str) -> dict[str, str]:
+    """Every node, and the monitor in this process, on one backend: the nodes' environment.
+
+    A simulated campaign stays on this machine unless a discovery range was chosen
+    (ros_environment.py).
+    """
+    env = {"RIG_RUNTIME_BACKEND": backend}
+    os.environ.update(env)
+    ros_environment.localhost_by_default(os.environ)
+    return env
+
+
+def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Outcome:
+    """Start the graph, follow it until it ends, fails, times out or is stopped; stop it.
+
+    SIGTERM and SIGHUP stop the graph as Ctrl-C does; ``launcher.failure`` says why a run did
+    not end by itself (a node's exit, the timeout, the signal).
+    """
+    from tqdm import tqdm
+
+    monitor = CampaignMonitor()
+    started = time.monotonic()
+    stopped_by: list[str] = []
+
+    def _on_signal(signum: int, _frame: Any) -> None:
+        # kill, a job scheduler's time limit or a closed terminal: stop the graph as Ctrl-C does
+        # (the nodes are in their own process groups and would otherwise run on).
+        stopped_by.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
+    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGHUP)}
+    launcher.start()
+    reason: str | None = None
+    progress = tqdm(total=1, unit="sample", unit_scale=True, desc="experiment", disable=quiet)
+    try:
+        while reason is None:
+            monitor.spin(0.2)
+            if monitor.total and progress.total != monitor.total:
+                progress.total = monitor.total
+            progress.n = monitor.k
+            progress.set_postfix_str(monitor.state or "starting")
+            progress.refresh()
+            reason = launcher.poll()
+            if timeout and time.monotonic() - started > timeout:
+                reason = f"timeout after {timeout:g} s"
+                launcher.failure = reason
+    except KeyboardInterrupt:
+        reason = "interrupted"
+        launcher.failure = (
+            f"stopped by {stopped_by[0]}" if stopped_by else "interrupted by the user"
+        )
+    finally:
+        previous[signal.SIGINT] = signal.getsignal(signal.SIGINT)
+        for sig in previous:  # the graph is being stopped (bounded): let that finish
+            signal.signal(sig, signal.SIG_IGN)
+        progress.close()
+        monitor.close()
+        codes = launcher.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return Outcome(reason, codes, time.monotonic() - started, monitor.total, monitor.fs)
+
+
+def summarise(run_dir: Path, backend: str, outcome: Outcome, *, allow_excluded: bool) -> int:
+    """Judge a finished run, write campaign.json, print the results; the exit code."""
+    bad = {n: c for n, c in outcome.codes.items() if c not in (0, -2, 130)}
+    if not (run_dir / "table1_all_levels.md").exists():
+        print(
+            f"aero-rig: the identifier produced no report ({outcome.reason}); "
+            f"exit codes {outcome.codes}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED
+    problems = run_problems(run_dir, outcome.total)
+    # seconds from the plan's own sample rate (/experiment/plan), never an assumed one
+    experiment_s = outcome.total / outcome.fs if outcome.total and outcome.fs else None
+    summary = {
+        "wall_s": round(outcome.wall, 1),
+        "backend": backend,
+        "experiment_s": round(experiment_s, 1) if experiment_s else None,
+        "real_time_factor": round(experiment_s / outcome.wall, 1) if experiment_s else None,
+        "exit_codes": outcome.codes,
+        "clean": not problems,
+        "problems": problems,
+    }
+    (run_dir / "campaign.json").write_text(json.dumps(summary, indent=1))
+    print_results(run_dir, summary, bad)
+    if problems:
+        print_problems(run_dir, problems)
+        if not allow_excluded:
+            print(
+                "aero-rig: the campaign lost or excluded data (above); exit code 3. Pass "
+                "--allow-excluded to accept such a run.",
+                file=sys.stderr,
+            )
+            return EXIT_NOT_CLEAN
+    else:
+        print("data clean: every plan sample arrived and was recorded once, no anomaly")
+    return EXIT_OK
+
+
+def print_results(run_dir: Path, summary: dict[str, Any], bad: dict[str, int]) -> None:
+    """Table 1 (all levels, level 1, what the clustering changed), times, the run directory."""
+    print("\nTable 1, trained on all levels (estimation: one realization per level):")
+    print((run_dir / "table1_all_levels.md").read_text())
+    level1 = run_dir / "table1_level1.md"
+    if level1.exists():
+        print("\nTable 1, trained on level 1 only (the paper's variant):")
+        print(level1.read_text())
+    clustering = run_dir / "clustering.md"
+    if clustering.exists():
+        print("\nWhat the period clustering changed (clustering.md, table1_no_clustering.md):")
+        print("\n".join(x for x in clustering.read_text().splitlines() if x.startswith("|")))
+    print(
+        f"\nwall time {summary['wall_s']} s for {summary['experiment_s']} s of experiment "
+        f"({summary['real_time_factor']}x real time)"
+    )
+    print(f"run directory: {run_dir}  (bag/, models.json, table1_*.md|csv, *.png, logs/)")
+    if bad:
+        print(f"aero-rig: warning: nodes stopped uncleanly: {bad}", file=sys.stderr)
+
+
+def print_problems(run_dir: Path, problems: list[str]) -> None:
+    """What the run lost or excluded, the first MAX_LISTED_PROBLEMS of it."""
+    print(f"\nDATA NOT CLEAN: {len(problems)} problem(s); Table 1 uses only what was left:")
+    for line in problems[:MAX_LISTED_PROBLEMS]:
+        print(f"  - {line}")
+    if len(problems) > MAX_LISTED_PROBLEMS:
+        more = len(problems) - MAX_LISTED_PROBLEMS
+        print(f"  - … {more} more in {run_dir / 'data_quality.md'}")

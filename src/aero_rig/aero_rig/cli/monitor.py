@@ -1,0 +1,56 @@
+"""The campaign's in-process observer: the plan, the progress and the identifier's state."""
+
+import json
+from typing import Any
+
+from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, IDENTIFICATION_STATUS
+
+
+class CampaignMonitor:
+    """In-process observer: progress from segment events, end from the identifier's status."""
+
+    def __init__(self) -> None:
+        from rig_runtime.node import Node
+
+        self.node = Node("aero_rig_campaign", argv=[])  # the graph's backend (the env's)
+        self.total = 0
+        self.fs = 0.0  # the plan's sample rate [Hz]
+        self.k = 0
+        self.state = ""
+        self.model: dict[str, Any] | None = None
+        self.node.create_subscription(
+            EXPERIMENT_PLAN.type, EXPERIMENT_PLAN.name, self._plan, EXPERIMENT_PLAN.qos
+        )
+        self.node.create_subscription(
+            EXPERIMENT_SEGMENT.type, EXPERIMENT_SEGMENT.name, self._segment, EXPERIMENT_SEGMENT.qos
+        )
+        self.node.create_subscription(
+            IDENTIFICATION_STATUS.type,
+            IDENTIFICATION_STATUS.name,
+            self._status,
+            IDENTIFICATION_STATUS.qos,
+        )
+
+    def _plan(self, msg: Any) -> None:
+        plan = json.loads(msg.data)
+        self.total = int(plan["total_samples"])
+        self.fs = float(plan["fs"])
+
+    def _segment(self, msg: Any) -> None:
+        event = json.loads(msg.data)
+        if event.get("event") == "end":
+            self.k = int(event["start_k"]) + int(event["length"])
+        elif event.get("event") == "plan_end":
+            self.k = self.total
+
+    def _status(self, msg: Any) -> None:
+        for status in msg.status:
+            for kv in status.values:
+                if kv.key == "state":
+                    self.state = kv.value
+
+    def spin(self, seconds: float) -> None:
+        self.node.spin_until(lambda: False, seconds)
+
+    def close(self) -> None:
+        self.node.close()
