@@ -18,6 +18,7 @@ import yaml
 from rosbags.highlevel import AnyReader
 
 from multisine_gen.campaigns import build_plan
+from multisine_gen.plan_format import plan_to_json
 from rig_runtime import Node
 from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import (
@@ -64,7 +65,7 @@ def small_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
         limits=None,
     )
     path = tmp_path_factory.mktemp("plan") / "small.json"
-    path.write_text(plan.to_json())
+    path.write_text(plan_to_json(plan))
     return path
 
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from multisine_gen.plan import ExperimentPlan
+from multisine_gen.plan_format import plan_to_json
 from pitch_actuator.dynamics import ActuatorModel
 from pressure_scanner.integration import PressureIntegrator
 from wing_sim.plant import WingPlant
@@ -46,5 +47,5 @@ def simulate_plan(
     cl = integrator.integrate(pressures, pitch, plant.dynamic_pressure_pa).cl
     stamps = T0_NS + np.round(np.arange(len(command)) * 1e9 / plan.fs).astype(np.int64)
     return SimulatedRun(
-        json.loads(plan.to_json()), stamps, np.degrees(pitch), cl, truth.light_stall.copy()
+        json.loads(plan_to_json(plan)), stamps, np.degrees(pitch), cl, truth.light_stall.copy()
     )

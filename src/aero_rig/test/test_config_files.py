@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from rig_runtime.graph import NodeSpec, entry_point, load_graph
-from rig_runtime.interface import RECORDED_TOPICS
+from rig_runtime.interface import RECORDED_TOPICS, ActuatorLimits
 from rig_runtime.params import Parameter, ParameterError, resolve_parameters
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -202,6 +202,33 @@ def test_every_key_is_commented() -> None:
             assert "#" in line or above.startswith("#"), (
                 f"{path.name}:{i + 1}: {match.group(1)} has no comment (meaning and unit)"
             )
+
+
+def test_every_copy_of_the_actuator_limits_holds_the_contracts_defaults() -> None:
+    """The limits are declared once (rig_runtime.interface.ActuatorLimits); the parameter files
+    of the generator and of both actuators repeat them, and must repeat them unchanged."""
+    defaults = ActuatorLimits().as_dict()
+    copies = [
+        (path.name, section, key, value)
+        for path in _parameter_files()
+        for section, values in _sections(path).items()
+        for key, value in values.items()
+        if key in defaults
+    ]
+    holders = {(name, section) for name, section, _, _ in copies}
+    assert {
+        ("generator.yaml", "generator"),
+        ("sim_actuator.yaml", "sim_actuator"),
+        ("hw_actuator.yaml", "hw_actuator"),
+    } <= holders, holders
+    for name, section, key, value in copies:
+        assert isinstance(value, float) and value == defaults[key], (
+            f"{name}: {section}.{key} = {value!r}, rig_runtime.interface.ActuatorLimits has "
+            f"{defaults[key]!r}; change the limits there (one declaration), not in one file"
+        )
+    for name, section in holders:  # all three keys, never one alone
+        keys = {key for n, s, key, _ in copies if (n, s) == (name, section)}
+        assert keys == set(defaults), f"{name}: {section} sets only {sorted(keys)}"
 
 
 @pytest.mark.parametrize("graph", ["sim.yaml", "rig.yaml"])

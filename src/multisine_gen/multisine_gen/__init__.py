@@ -16,10 +16,16 @@ from multisine_gen.plan import (
     ExperimentPlan,
     MultisineLevel,
     PlanError,
-    PlanLimits,
     PlanSample,
     Segment,
     SineTest,
+)
+from multisine_gen.plan_format import (
+    plan_from_dict,
+    plan_from_json,
+    plan_to_dict,
+    plan_to_json,
+    segment_event,
 )
 from multisine_gen.sine import Sine, design_sine
 
@@ -31,7 +37,6 @@ __all__ = [
     "Multisine",
     "MultisineLevel",
     "PlanError",
-    "PlanLimits",
     "PlanSample",
     "Segment",
     "Sine",
@@ -42,7 +47,12 @@ __all__ = [
     "design_line_grid",
     "design_sine",
     "odd_random_phase_multisine",
+    "plan_from_dict",
+    "plan_from_json",
+    "plan_to_dict",
+    "plan_to_json",
     "random_phase_multisine",
     "reduce_crest_factor",
+    "segment_event",
     "short_plan",
 ]

@@ -16,10 +16,10 @@ from multisine_gen.plan import (
     ExperimentPlan,
     MultisineLevel,
     PlanError,
-    PlanLimits,
     SineTest,
 )
 from multisine_gen.sine import design_sine
+from rig_runtime.interface import ActuatorLimits
 
 __all__ = ["build_plan", "default_plan", "short_plan"]
 
@@ -52,7 +52,7 @@ def build_plan(
     rest_deg: float = 0.0,
     ramp_rate_deg_s: float = 5.0,
     seed: int | None = 0,
-    limits: PlanLimits | None = None,
+    limits: ActuatorLimits | None = None,
 ) -> ExperimentPlan:
     """Design a campaign: multisine levels at `offsets_deg` (level i), M = `realizations` odd
     random-phase realizations each on one shared line grid, and sines at `sine_offsets_deg[i]`
@@ -109,7 +109,7 @@ def build_plan(
         levels=tuple(levels),
         sines=tuple(sines),
         seed=entropy,
-        limits=limits if limits is not None else PlanLimits(),
+        limits=limits if limits is not None else ActuatorLimits(),
     )
 
 
@@ -118,7 +118,7 @@ def default_plan(
     *,
     include_baseline: bool = True,
     crest_factor_reduction: bool = False,
-    limits: PlanLimits | None = None,
+    limits: ActuatorLimits | None = None,
 ) -> ExperimentPlan:
     """The paper's campaign (§3.2): baseline sweep 0.52 °/s up to 30° and back; odd
     random-phase multisines 0.02–1.98 Hz, fs 200 Hz, N 10,000 (50 s periods), 2.4° std at
@@ -137,7 +137,7 @@ def short_plan(
     seed: int | None = 0,
     *,
     crest_factor_reduction: bool = False,
-    limits: PlanLimits | None = None,
+    limits: ActuatorLimits | None = None,
 ) -> ExperimentPlan:
     """The default plan's structure, small enough for tests: N = 2,000 (10 s periods, 0.1 Hz
     resolution), band 0.1–1.98 Hz, levels 6.6° and 19.9° (2.4° std), M = 2 realizations × (1

@@ -35,11 +35,15 @@ from rig_runtime.interface import (
     PITCH_COMMAND,
     PITCH_JOINT,
     WING_COEFFICIENTS,
+    ActuatorLimits,
 )
 
 from .campaigns import default_plan, short_plan
 from .pacing import StreamPacer
-from .plan import ExperimentPlan, PlanLimits
+from .plan import ExperimentPlan
+from .plan_format import plan_from_json, plan_to_json, segment_event
+
+_LIMITS = ActuatorLimits()  # the defaults of the limit parameters
 
 PARAMETERS = [
     Parameter("plan", "short", "experiment plan: 'default', 'short' or a plan JSON file"),
@@ -64,16 +68,21 @@ PARAMETERS = [
         "start_timeout_s", 60.0, "give up waiting for the barrier after this long [s]", min=0.1
     ),
     Parameter("exit_at_end", False, "exit after the plan (else keep the plan latched)"),
-    Parameter("min_deg", -10.0, "actuator lower limit the plan is checked against [deg]"),
-    Parameter("max_deg", 35.0, "actuator upper limit the plan is checked against [deg]"),
-    Parameter("max_rate_deg_s", 150.0, "actuator rate limit the plan is checked against", min=0.1),
+    Parameter("min_deg", _LIMITS.min_deg, "actuator lower limit the plan is checked against [deg]"),
+    Parameter("max_deg", _LIMITS.max_deg, "actuator upper limit the plan is checked against [deg]"),
+    Parameter(
+        "max_rate_deg_s",
+        _LIMITS.max_rate_deg_s,
+        "actuator rate limit the plan is checked against",
+        min=0.1,
+    ),
 ]
 
 DEG = 3.141592653589793 / 180.0
 
 
 def load_plan(spec: str, seed: int) -> ExperimentPlan:
-    """'default', 'short' or a JSON file written by ExperimentPlan.to_json()."""
+    """'default', 'short' or a JSON file written by plan_format.plan_to_json()."""
     if spec == "default":
         return default_plan(seed=seed)
     if spec == "short":
@@ -81,7 +90,7 @@ def load_plan(spec: str, seed: int) -> ExperimentPlan:
     path = Path(spec)
     if not path.exists():
         raise ValueError(f"parameter 'plan' = {spec!r}: not 'default', 'short' or an existing file")
-    return ExperimentPlan.from_json(path.read_text())
+    return plan_from_json(path.read_text())
 
 
 class Generator:
@@ -91,7 +100,7 @@ class Generator:
         self.plan = load_plan(p["plan"], p["seed"])
         # Refuse before publishing anything if the plan would leave the actuator's limits.
         self.plan.validate(
-            PlanLimits(
+            ActuatorLimits(
                 min_deg=p["min_deg"], max_deg=p["max_deg"], max_rate_deg_s=p["max_rate_deg_s"]
             )
         )
@@ -198,7 +207,7 @@ class Generator:
             return False
         self.t0_ns = time.time_ns()
         self.pacer.start(time.monotonic())
-        payload = json.loads(self.plan.to_json())
+        payload = json.loads(plan_to_json(self.plan))
         payload["t0_ns"] = self.t0_ns
         self.plan_pub.publish(self.node.new_message(EXPERIMENT_PLAN.type, data=json.dumps(payload)))
         self.node.logger.info(
@@ -221,7 +230,7 @@ class Generator:
             k = self.k
             segment = self.starts.get(k)
             if segment is not None:
-                self._event(segment.event("start", t0_s, self.fs) | {"t0_ns": self.t0_ns})
+                self._event(segment_event(segment, "start", t0_s, self.fs) | {"t0_ns": self.t0_ns})
             msg = self.node.new_message(
                 PITCH_COMMAND.type,
                 name=[PITCH_JOINT],
@@ -231,7 +240,7 @@ class Generator:
             self.cmd_pub.publish(msg)
             segment = self.ends.get(k)
             if segment is not None:
-                self._event(segment.event("end", t0_s, self.fs) | {"t0_ns": self.t0_ns})
+                self._event(segment_event(segment, "end", t0_s, self.fs) | {"t0_ns": self.t0_ns})
             self.k += 1
         if self.k >= self.total:
             self.finished = True

@@ -17,27 +17,30 @@ Structure (paper §3.2):
 A ramp into a periodic block ends at the last sample of that block's period, so the block's
 first sample follows as it would in the periodic steady state (no step at the joint).
 
-The plan's JSON wire format is in plan_format.py; the campaign presets (build_plan,
-default_plan, short_plan) are in campaigns.py.
+This module is the model only: the plan's JSON wire format (`/experiment/plan` and the
+`/experiment/segment` events) is in plan_format.py, which imports this one and is the only place
+a plan is written or read as JSON; the campaign presets (build_plan, default_plan, short_plan)
+are in campaigns.py. The limits a plan is checked against are the actuator's
+(rig_runtime.interface.ActuatorLimits, the one declaration of them).
 """
 
 import bisect
 import math
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
 from multisine_gen.multisine import ExcitationError, Multisine
 from multisine_gen.sine import Sine
+from rig_runtime.interface import ActuatorLimits
 
 __all__ = [
     "BaselineSweep",
     "ExperimentPlan",
     "MultisineLevel",
     "PlanError",
-    "PlanLimits",
     "PlanSample",
     "Segment",
     "SegmentKind",
@@ -53,22 +56,6 @@ class PlanError(ExcitationError):
     def __init__(self, message: str, problems: list[str] | None = None) -> None:
         super().__init__(message)
         self.problems = problems if problems is not None else [message]
-
-
-@dataclass(frozen=True)
-class PlanLimits:
-    """What the actuator accepts (degrees); the defaults match pitch_actuator's ActuatorLimits."""
-
-    min_deg: float = -10.0
-    max_deg: float = 35.0
-    max_rate_deg_s: float = 150.0
-
-    def __post_init__(self) -> None:
-        values = (self.min_deg, self.max_deg, self.max_rate_deg_s)
-        if not all(math.isfinite(v) for v in values):
-            raise PlanError(f"plan limits must be finite, got {self}")
-        if not self.min_deg < self.max_deg or self.max_rate_deg_s <= 0.0:
-            raise PlanError(f"plan limits need min_deg < max_deg and max_rate_deg_s > 0: {self}")
 
 
 @dataclass(frozen=True)
@@ -189,26 +176,6 @@ class Segment:
             head += f", {self.frequency_hz:g} Hz, amplitude {self.amplitude_deg:g}°"
         return f"settle before {head}" if self.kind == "settle" else head
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> "Segment":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise PlanError(f"segment has unknown field(s) {unknown}")
-        return cls(**values)
-
-    def event(self, edge: Literal["start", "end"], t0_s: float, fs: float) -> dict[str, Any]:
-        """The `/experiment/segment` payload for this segment's start or end: the record plus
-        the stamps of its first and last samples (t0 + k/fs)."""
-        payload: dict[str, Any] = {"event": edge}
-        payload.update(self.to_dict())
-        payload["start_stamp_s"] = t0_s + self.start_k / fs
-        payload["end_stamp_s"] = t0_s + (self.stop_k - 1) / fs
-        return payload
-
 
 @dataclass(frozen=True, slots=True)
 class PlanSample:
@@ -233,8 +200,9 @@ class ExperimentPlan:
 
     fs [Hz]; rest_deg: where the plan starts and ends; ramp_rate_deg_s: ramps between blocks;
     baseline: the quasi-static sweep or None; levels: multisine levels; sines: validation
-    sines; seed: the seed the random parts were drawn from; limits: checked at construction.
-    Raises PlanError when the plan would leave the limits, exceed the rate or reach fs/2.
+    sines; seed: the seed the random parts were drawn from; limits: the actuator's limits
+    (rig_runtime.interface.ActuatorLimits), checked at construction. Raises PlanError when the
+    plan would leave the limits, exceed the rate or reach fs/2.
     """
 
     fs: float
@@ -244,7 +212,7 @@ class ExperimentPlan:
     levels: tuple[MultisineLevel, ...] = ()
     sines: tuple[SineTest, ...] = ()
     seed: int | None = None
-    limits: PlanLimits = field(default_factory=PlanLimits)
+    limits: ActuatorLimits = field(default_factory=ActuatorLimits)
     segments: tuple[Segment, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -475,17 +443,17 @@ class ExperimentPlan:
     # -- validation -----------------------------------------------------------------------------
     def validate(
         self,
-        min_deg: float | PlanLimits | None = None,
+        min_deg: float | ActuatorLimits | None = None,
         max_deg: float | None = None,
         max_rate_deg_s: float | None = None,
     ) -> None:
         """Refuse (PlanError) a plan that commands outside [min_deg, max_deg], changes faster
         than max_rate_deg_s between samples (including the first step from the rest angle),
         ramps faster than allowed, or excites at or above fs/2. Limits not given come from
-        self.limits; a PlanLimits may be passed instead of the three numbers."""
-        if isinstance(min_deg, PlanLimits):
+        self.limits; an ActuatorLimits may be passed instead of the three numbers."""
+        if isinstance(min_deg, ActuatorLimits):
             if max_deg is not None or max_rate_deg_s is not None:
-                raise TypeError("validate: pass either a PlanLimits or the numbers, not both")
+                raise TypeError("validate: pass either an ActuatorLimits or the numbers, not both")
             given = min_deg
             min_deg, max_deg, max_rate_deg_s = (
                 given.min_deg,
@@ -525,29 +493,3 @@ class ExperimentPlan:
         if problems:
             more = f" (and {len(problems) - 1} more problem(s))" if len(problems) > 1 else ""
             raise PlanError(f"plan refused: {problems[0]}{more}", problems)
-
-    # -- JSON (the /experiment/plan payload) ----------------------------------------------------
-    # The wire format lives in plan_format.py; these methods delegate to it.
-    def to_dict(self) -> dict[str, Any]:
-        from multisine_gen.plan_format import plan_to_dict
-
-        return plan_to_dict(self)
-
-    def to_json(self, indent: int | None = None) -> str:
-        """The plan as JSON (floats written with round-trip precision)."""
-        from multisine_gen.plan_format import plan_to_json
-
-        return plan_to_json(self, indent)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "ExperimentPlan":
-        from multisine_gen.plan_format import plan_from_dict
-
-        return plan_from_dict(data, cls)
-
-    @classmethod
-    def from_json(cls, text: str) -> "ExperimentPlan":
-        """Rebuild a plan from `to_json()` output; every sample comes out identical."""
-        from multisine_gen.plan_format import plan_from_json
-
-        return plan_from_json(text, cls)

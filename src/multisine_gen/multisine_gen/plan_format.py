@@ -1,15 +1,20 @@
-"""The `/experiment/plan` JSON wire format of an ExperimentPlan.
+"""The JSON wire format of an ExperimentPlan: `/experiment/plan` and `/experiment/segment`.
+
+The only place a plan is written or read as JSON. It imports the model (plan.py), never the
+other way round.
 
 `plan_to_dict` / `plan_to_json` write a plan with every excitation parameter (phases, lines,
-amplitudes, seeds) and its segment records; `plan_from_dict` / `plan_from_json` rebuild it, so
-every sample comes out identical, and refuse a payload whose segments disagree with the ones its
-excitations produce. ExperimentPlan.to_dict / from_dict / to_json / from_json delegate here.
+amplitudes, seeds), its limits and its segment records; `plan_from_dict` / `plan_from_json`
+rebuild it, so every sample comes out identical, and refuse a payload whose segments disagree
+with the ones its excitations produce. `segment_event` is the `/experiment/segment` payload of a
+segment's start or end: its record (`segment_to_dict`) and the stamps of its first and last
+samples.
 """
 
 import json
 import math
 from dataclasses import asdict, fields
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -19,11 +24,11 @@ from multisine_gen.plan import (
     ExperimentPlan,
     MultisineLevel,
     PlanError,
-    PlanLimits,
     Segment,
     SineTest,
 )
 from multisine_gen.sine import Sine
+from rig_runtime.interface import ActuatorLimits
 
 __all__ = [
     "PLAN_FORMAT",
@@ -32,6 +37,9 @@ __all__ = [
     "plan_from_json",
     "plan_to_dict",
     "plan_to_json",
+    "segment_event",
+    "segment_from_dict",
+    "segment_to_dict",
 ]
 
 PLAN_FORMAT = "multisine_gen/experiment_plan"
@@ -57,7 +65,8 @@ def plan_to_dict(plan: ExperimentPlan) -> dict[str, Any]:
         "seed": plan.seed,
         "rest_deg": plan.rest_deg,
         "ramp_rate_deg_s": plan.ramp_rate_deg_s,
-        "limits": asdict(plan.limits),
+        # The ActuatorLimits fields only (a subclass's extra settings are not the plan's).
+        "limits": {f.name: getattr(plan.limits, f.name) for f in fields(ActuatorLimits)},
         "baseline": asdict(plan.baseline) if plan.baseline is not None else None,
         "levels": [
             {
@@ -85,20 +94,18 @@ def plan_to_dict(plan: ExperimentPlan) -> dict[str, Any]:
         ],
         "total_samples": plan.total_samples,
         "duration_s": plan.duration_s,
-        "segments": [s.to_dict() for s in plan.segments],
+        "segments": [segment_to_dict(s) for s in plan.segments],
     }
 
 
 def plan_to_json(plan: ExperimentPlan, indent: int | None = None) -> str:
     """The plan as JSON (floats written with round-trip precision)."""
-    return json.dumps(plan.to_dict(), indent=indent, allow_nan=False)
+    return json.dumps(plan_to_dict(plan), indent=indent, allow_nan=False)
 
 
-def plan_from_dict(
-    data: dict[str, Any], cls: type[ExperimentPlan] = ExperimentPlan
-) -> ExperimentPlan:
-    """Rebuild a plan (an instance of cls) from `plan_to_dict` output; PlanError if the payload
-    is of another format or version, mistypes a field, or its segments disagree."""
+def plan_from_dict(data: dict[str, Any]) -> ExperimentPlan:
+    """Rebuild a plan from `plan_to_dict` output; PlanError if the payload is of another format
+    or version, mistypes a field, or its segments disagree."""
     if data.get("format") != PLAN_FORMAT or data.get("version") != PLAN_VERSION:
         raise PlanError(
             f"not an experiment plan of format {PLAN_FORMAT!r} version {PLAN_VERSION}: got "
@@ -131,7 +138,7 @@ def plan_from_dict(
             for t in data["sines"]
         )
         baseline = BaselineSweep(**data["baseline"]) if data["baseline"] else None
-        plan = cls(
+        plan = ExperimentPlan(
             fs=fs,
             rest_deg=float(data["rest_deg"]),
             ramp_rate_deg_s=float(data["ramp_rate_deg_s"]),
@@ -139,13 +146,13 @@ def plan_from_dict(
             levels=levels,
             sines=sines,
             seed=data["seed"],
-            limits=PlanLimits(**data["limits"]),
+            limits=ActuatorLimits(**data["limits"]),
         )
     except PlanError:
         raise
     except (KeyError, TypeError, ValueError) as error:
         raise PlanError(f"experiment plan JSON is missing or mistypes a field: {error}") from error
-    stored = [Segment.from_dict(s) for s in data.get("segments", [])]
+    stored = [segment_from_dict(s) for s in data.get("segments", [])]
     if not _same_segments(stored, plan.segments):
         raise PlanError(
             "experiment plan JSON: its segments disagree with the segments its excitations "
@@ -154,15 +161,41 @@ def plan_from_dict(
     return plan
 
 
-def plan_from_json(text: str, cls: type[ExperimentPlan] = ExperimentPlan) -> ExperimentPlan:
-    """Rebuild a plan from `to_json()` output; every sample comes out identical."""
+def plan_from_json(text: str) -> ExperimentPlan:
+    """Rebuild a plan from `plan_to_json` output; every sample comes out identical."""
     try:
         data = json.loads(text)
     except json.JSONDecodeError as error:
         raise PlanError(f"experiment plan is not valid JSON: {error}") from error
     if not isinstance(data, dict):
         raise PlanError("experiment plan JSON must be an object")
-    return cls.from_dict(data)
+    return plan_from_dict(data)
+
+
+def segment_to_dict(segment: Segment) -> dict[str, Any]:
+    """A segment's record, as the plan's `segments` and the segment events carry it."""
+    return asdict(segment)
+
+
+def segment_from_dict(values: dict[str, Any]) -> Segment:
+    """The segment of a `segment_to_dict` record; PlanError naming any unknown field."""
+    known = {f.name for f in fields(Segment)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise PlanError(f"segment has unknown field(s) {unknown}")
+    return Segment(**values)
+
+
+def segment_event(
+    segment: Segment, edge: Literal["start", "end"], t0_s: float, fs: float
+) -> dict[str, Any]:
+    """The `/experiment/segment` payload for a segment's start or end: its record plus the
+    stamps of its first and last samples (t0 + k/fs)."""
+    payload: dict[str, Any] = {"event": edge}
+    payload.update(segment_to_dict(segment))
+    payload["start_stamp_s"] = t0_s + segment.start_k / fs
+    payload["end_stamp_s"] = t0_s + (segment.stop_k - 1) / fs
+    return payload
 
 
 def _same_segments(a: list[Segment], b: tuple[Segment, ...]) -> bool:

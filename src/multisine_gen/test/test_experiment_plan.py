@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from multisine_gen.campaigns import build_plan, default_plan, short_plan
-from multisine_gen.plan import ExperimentPlan, PlanError, PlanLimits
+from multisine_gen.plan import ExperimentPlan, PlanError
+from multisine_gen.plan_format import plan_from_json, plan_to_json, segment_event
+from rig_runtime.interface import ActuatorLimits
 
 
 @pytest.fixture(scope="module")
@@ -83,33 +85,42 @@ def test_plan_starts_and_ends_at_rest_with_limited_ramps(campaign: ExperimentPla
 
 
 def test_json_round_trip_rebuilds_every_sample(short: ExperimentPlan) -> None:
-    text = short.to_json()
+    text = plan_to_json(short)
     payload = json.loads(text)
     for key in ("fs", "N", "excited_lines", "detection_lines", "seed", "segments", "levels"):
         assert key in payload
     realization = payload["levels"][0]["realizations"][1]
     for key in ("amplitudes", "phases", "seed", "excited_lines"):
         assert key in realization
-    rebuilt = ExperimentPlan.from_json(text)
+    rebuilt = plan_from_json(text)
     np.testing.assert_array_equal(rebuilt.command_deg(), short.command_deg())
     assert rebuilt.segments == short.segments
-    assert rebuilt.to_json() == text
+    assert plan_to_json(rebuilt) == text
 
 
 def test_tampered_or_foreign_json_is_refused(short: ExperimentPlan) -> None:
-    payload = json.loads(short.to_json())
+    payload = json.loads(plan_to_json(short))
     payload["levels"][0]["realizations"][0]["phases"][0] += 1.0
     with pytest.raises(PlanError, match="segments disagree"):
-        ExperimentPlan.from_json(json.dumps(payload))
+        plan_from_json(json.dumps(payload))
     with pytest.raises(PlanError, match="not an experiment plan"):
-        ExperimentPlan.from_json('{"format": "something else"}')
+        plan_from_json('{"format": "something else"}')
     with pytest.raises(PlanError, match="not valid JSON"):
-        ExperimentPlan.from_json("{")
+        plan_from_json("{")
+
+
+def test_plan_is_checked_against_the_contracts_actuator_limits(short: ExperimentPlan) -> None:
+    assert short.limits == ActuatorLimits()  # rig_runtime.interface: the one declaration
+    payload = json.loads(plan_to_json(short))
+    assert payload["limits"] == ActuatorLimits().as_dict()
+    payload["limits"]["max_deg"] = payload["limits"]["min_deg"]
+    with pytest.raises(PlanError, match=r"min_deg .* must be below max_deg"):
+        plan_from_json(json.dumps(payload))
 
 
 def test_same_seed_same_plan_other_seed_other_phases() -> None:
     a, b, c = short_plan(seed=3), short_plan(seed=3), short_plan(seed=4)
-    assert a.to_json() == b.to_json()
+    assert plan_to_json(a) == plan_to_json(b)
     pa = a.levels[0].realizations[0].phases
     pc = c.levels[0].realizations[0].phases
     assert not np.array_equal(pa, pc)
@@ -153,7 +164,7 @@ def test_sample_stream_marks_segment_starts_and_ends(short: ExperimentPlan) -> N
     assert resumed[0].k == middle.start_k + 5 and not resumed[0].starts_segment
     assert len(resumed) == u.size - middle.start_k - 5
     assert short.segment_at(middle.start_k + 5) is middle
-    event = middle.event("start", t0_s=100.0, fs=short.fs)
+    event = segment_event(middle, "start", t0_s=100.0, fs=short.fs)
     assert event["kind"] == "multisine" and event["realization"] == 0 and event["period"] == 1
     assert event["start_stamp_s"] == pytest.approx(100.0 + middle.start_k / short.fs)
 
@@ -190,11 +201,11 @@ def test_plan_too_fast_for_the_actuator_is_refused_naming_the_segment(
     assert any("1.6 Hz" in p and "rate reaches 47" in p for p in refused.value.problems)
     assert "°/s above the limit 40" in str(refused.value)
     with pytest.raises(PlanError, match="above the limit 40"):
-        short.validate(PlanLimits(max_rate_deg_s=40.0))  # a node passes its limits record
-    short.validate(PlanLimits(max_rate_deg_s=60.0))
+        short.validate(ActuatorLimits(max_rate_deg_s=40.0))  # a node passes its limits record
+    short.validate(ActuatorLimits(max_rate_deg_s=60.0))
     with pytest.raises(PlanError, match=r"ramps: ramp_rate_deg_s 10.0°/s exceeds"):
         short.validate(max_rate_deg_s=8.0)
     with pytest.raises(PlanError, match="rate reaches"):
         build_plan(
-            N=2000, f_min_hz=0.1, sine_offsets_deg=(), limits=PlanLimits(max_rate_deg_s=20.0)
+            N=2000, f_min_hz=0.1, sine_offsets_deg=(), limits=ActuatorLimits(max_rate_deg_s=20.0)
         )

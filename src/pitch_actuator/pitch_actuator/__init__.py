@@ -3,7 +3,6 @@
 from pitch_actuator.dynamics import ActuatorModel, ActuatorParams, ActuatorSample
 from pitch_actuator.gust import FreeStreamGust
 from pitch_actuator.safety import (
-    ActuatorLimits,
     DiagnosticLevel,
     GovernorCounters,
     GovernorEvent,
@@ -11,10 +10,10 @@ from pitch_actuator.safety import (
     GovernorStatus,
     LimitsError,
     SafetyGovernor,
+    SafetyLimits,
 )
 
 __all__ = [
-    "ActuatorLimits",
     "ActuatorModel",
     "ActuatorParams",
     "ActuatorSample",
@@ -26,4 +25,5 @@ __all__ = [
     "GovernorStatus",
     "LimitsError",
     "SafetyGovernor",
+    "SafetyLimits",
 ]

@@ -13,19 +13,46 @@ from rig_runtime import Node, Parameter
 from rig_runtime.diagnostics import diagnostic_array
 from rig_runtime.interface import DIAGNOSTICS, PITCH_JOINT, joint_position
 
-from .safety import ActuatorLimits, GovernorEvent, SafetyGovernor
+from .safety import GovernorEvent, SafetyGovernor, SafetyLimits
 
+_DEFAULT = SafetyLimits()  # min_deg, max_deg, max_rate_deg_s: rig_runtime.interface.ActuatorLimits
+
+# One parameter per SafetyLimits field, named as the field (limits_from_params reads them back).
 LIMIT_PARAMETERS = [
-    Parameter("min_deg", -10.0, "lowest pitch setpoint ever sent [deg]", min=-90.0, max=90.0),
-    Parameter("max_deg", 35.0, "highest pitch setpoint ever sent [deg]", min=-90.0, max=90.0),
-    Parameter("max_rate_deg_s", 150.0, "setpoint rate limit [deg/s]", min=0.1, max=2000.0),
-    Parameter("safe_angle_deg", 0.0, "where the wing goes after a stop or lost commands [deg]"),
-    Parameter("watchdog_timeout_s", 0.25, "no command this long trips the watchdog [s]", min=0.005),
-    Parameter("hold_s", 1.0, "hold still this long after a trip or stop [s]", min=0.0),
-    Parameter("ramp_rate_deg_s", 5.0, "rate of the ramp to the safe angle [deg/s]", min=0.01),
+    Parameter(
+        "min_deg", _DEFAULT.min_deg, "lowest pitch setpoint ever sent [deg]", min=-90.0, max=90.0
+    ),
+    Parameter(
+        "max_deg", _DEFAULT.max_deg, "highest pitch setpoint ever sent [deg]", min=-90.0, max=90.0
+    ),
+    Parameter(
+        "max_rate_deg_s",
+        _DEFAULT.max_rate_deg_s,
+        "setpoint rate limit [deg/s]",
+        min=0.1,
+        max=2000.0,
+    ),
+    Parameter(
+        "safe_angle_deg",
+        _DEFAULT.safe_angle_deg,
+        "where the wing goes after a stop or lost commands [deg]",
+    ),
+    Parameter(
+        "watchdog_timeout_s",
+        _DEFAULT.watchdog_timeout_s,
+        "no command this long trips the watchdog [s]",
+        min=0.005,
+    ),
+    Parameter("hold_s", _DEFAULT.hold_s, "hold still this long after a trip or stop [s]", min=0.0),
+    Parameter(
+        "ramp_rate_deg_s",
+        _DEFAULT.ramp_rate_deg_s,
+        "rate of the ramp to the safe angle [deg/s]",
+        min=0.01,
+    ),
     Parameter(
         "limit_approach_s",
-        0.02,
+        _DEFAULT.limit_approach_s,
         "time constant of the exponential approach to a limit, against overshoot [s]",
         min=0.0,
         max=1.0,
@@ -35,9 +62,9 @@ LIMIT_PARAMETERS = [
 ]
 
 
-def limits_from_params(params: Any) -> ActuatorLimits:
-    """The node's limit parameters (LIMIT_PARAMETERS, named as the fields) as ActuatorLimits."""
-    return ActuatorLimits.from_mapping({f.name: params[f.name] for f in fields(ActuatorLimits)})
+def limits_from_params(params: Any) -> SafetyLimits:
+    """The node's limit parameters (LIMIT_PARAMETERS, named as the fields) as SafetyLimits."""
+    return SafetyLimits.from_mapping({f.name: params[f.name] for f in fields(SafetyLimits)})
 
 
 def command_position(msg: Any) -> float:

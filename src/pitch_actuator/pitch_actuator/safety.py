@@ -5,7 +5,7 @@ follow. It holds no clock: every call carries its time `t_s` (seconds, any monot
 node chooses, one clock per governor), so the same code runs at experiment time in simulation,
 at wall-clock time on the rig and at made-up times in tests.
 
-Units: the governor works in **degrees** (like the parameter files and `ActuatorLimits`);
+Units: the governor works in **degrees** (like the parameter files and `SafetyLimits`);
 `command_rad` / `setpoint_rad` are the radian doors for nodes that speak SI on the wire.
 
 Guarantees (docs/design.md §8):
@@ -22,11 +22,11 @@ Guarantees (docs/design.md §8):
 import enum
 import math
 from collections import deque
-from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
+from rig_runtime.interface import ActuatorLimits, LimitsError
+
 __all__ = [
-    "ActuatorLimits",
     "DiagnosticLevel",
     "GovernorCounters",
     "GovernorEvent",
@@ -34,16 +34,15 @@ __all__ = [
     "GovernorStatus",
     "LimitsError",
     "SafetyGovernor",
+    "SafetyLimits",
 ]
 
 
-class LimitsError(ValueError):
-    """Actuator limits that cannot be used (the node must not move anything)."""
-
-
 @dataclass(frozen=True)
-class ActuatorLimits:
-    """Actuator limits, in degrees and seconds as in the parameter files.
+class SafetyLimits(ActuatorLimits):
+    """The actuator limits (min_deg, max_deg, max_rate_deg_s and their defaults from
+    rig_runtime.interface.ActuatorLimits) and what the governor does at them and when commands
+    stop, in degrees and seconds as in the parameter files.
 
     Attributes:
         min_deg, max_deg: allowed pitch range of the setpoint.
@@ -52,62 +51,36 @@ class ActuatorLimits:
         watchdog_timeout_s: silence after the last accepted command that trips the watchdog.
         hold_s: how long the setpoint is held still after a trip or stop before ramping.
         ramp_rate_deg_s: rate of the ramp to the safe angle (≤ max_rate_deg_s).
+        limit_approach_s: time constant of the approach to a limit (0 = off).
     """
 
-    min_deg: float = -10.0
-    max_deg: float = 35.0
-    max_rate_deg_s: float = 150.0
     safe_angle_deg: float = 0.0
     watchdog_timeout_s: float = 0.25
     hold_s: float = 1.0
     ramp_rate_deg_s: float = 5.0
-    limit_approach_s: float = 0.02  # time constant of the approach to a limit (0 = off)
+    limit_approach_s: float = 0.02
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise LimitsError(f"ActuatorLimits.{f.name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise LimitsError(f"ActuatorLimits.{f.name} must be finite, got {value!r}")
-        if not self.min_deg < self.max_deg:
-            raise LimitsError(
-                f"ActuatorLimits: min_deg ({self.min_deg}) must be below max_deg "
-                f"({self.max_deg}); fix the parameter file"
-            )
+        super().__post_init__()  # every field a finite number, min < max, max rate > 0
         if not self.min_deg <= self.safe_angle_deg <= self.max_deg:
             raise LimitsError(
-                f"ActuatorLimits: safe_angle_deg ({self.safe_angle_deg}) must lie in "
+                f"SafetyLimits: safe_angle_deg ({self.safe_angle_deg}) must lie in "
                 f"[min_deg, max_deg] = [{self.min_deg}, {self.max_deg}]"
             )
-        for name in ("max_rate_deg_s", "ramp_rate_deg_s", "watchdog_timeout_s"):
+        for name in ("ramp_rate_deg_s", "watchdog_timeout_s"):
             if getattr(self, name) <= 0.0:
-                raise LimitsError(f"ActuatorLimits.{name} must be > 0, got {getattr(self, name)}")
+                raise LimitsError(f"SafetyLimits.{name} must be > 0, got {getattr(self, name)}")
         if self.hold_s < 0.0:
-            raise LimitsError(f"ActuatorLimits.hold_s must be >= 0, got {self.hold_s}")
+            raise LimitsError(f"SafetyLimits.hold_s must be >= 0, got {self.hold_s}")
         if self.limit_approach_s < 0.0:
             raise LimitsError(
-                f"ActuatorLimits.limit_approach_s must be >= 0, got {self.limit_approach_s}"
+                f"SafetyLimits.limit_approach_s must be >= 0, got {self.limit_approach_s}"
             )
         if self.ramp_rate_deg_s > self.max_rate_deg_s:
             raise LimitsError(
-                f"ActuatorLimits: ramp_rate_deg_s ({self.ramp_rate_deg_s}) must not exceed "
+                f"SafetyLimits: ramp_rate_deg_s ({self.ramp_rate_deg_s}) must not exceed "
                 f"max_rate_deg_s ({self.max_rate_deg_s})"
             )
-
-    @classmethod
-    def from_mapping(cls, values: Mapping[str, object]) -> "ActuatorLimits":
-        """Limits from a parameter mapping (e.g. a YAML section); unknown keys are refused."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise LimitsError(
-                f"unknown actuator limit parameter(s) {unknown}; expected some of {sorted(known)}"
-            )
-        return cls(**{k: float(v) for k, v in values.items()})  # type: ignore[arg-type]
-
-    def as_dict(self) -> dict[str, float]:
-        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
 
 
 class DiagnosticLevel(enum.IntEnum):
@@ -176,7 +149,7 @@ class SafetyGovernor:
     """Rate-limited, clamped, watchdog-guarded pitch setpoint (degrees; explicit time).
 
     Args:
-        limits: the actuator limits.
+        limits: the actuator limits and the watchdog, hold and ramp settings.
         initial_deg: where the actuator is now (clamped into the limits and reported if outside).
         t_s: time of construction on the governor's clock.
         max_step_interval_s: longest interval over which the rate budget accrues in one call,
@@ -193,7 +166,7 @@ class SafetyGovernor:
 
     def __init__(
         self,
-        limits: ActuatorLimits,
+        limits: SafetyLimits,
         initial_deg: float,
         t_s: float = 0.0,
         *,

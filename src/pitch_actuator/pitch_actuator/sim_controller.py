@@ -57,7 +57,9 @@ class _Model(Protocol):
 
 @dataclass(frozen=True)
 class SimControllerConfig:
-    """The controller's own settings (its hard limits are independent of the host's)."""
+    """The controller's own settings. Its hard limits are independent of the host's on purpose
+    (a second guard, as on the rig's PWAC controller), so they are not
+    rig_runtime.interface.ActuatorLimits: the simulated controller allows −10°…30°."""
 
     rate_hz: float = 200.0
     min_rad: float = math.radians(-10.0)

@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 
 from pitch_actuator.safety import (
-    ActuatorLimits,
     DiagnosticLevel,
     GovernorMode,
     LimitsError,
     SafetyGovernor,
+    SafetyLimits,
 )
+from rig_runtime.interface import ActuatorLimits
 
-LIMITS = ActuatorLimits(
+LIMITS = SafetyLimits(
     min_deg=-5.0,
     max_deg=30.0,
     max_rate_deg_s=100.0,
@@ -171,16 +172,28 @@ def test_radian_interface() -> None:
 
 def test_invalid_limits_are_refused_with_a_clear_message() -> None:
     with pytest.raises(LimitsError, match=r"min_deg .* must be below max_deg"):
-        ActuatorLimits(min_deg=10.0, max_deg=5.0)
+        SafetyLimits(min_deg=10.0, max_deg=5.0)
     with pytest.raises(LimitsError, match="safe_angle_deg"):
-        ActuatorLimits(safe_angle_deg=50.0)
+        SafetyLimits(safe_angle_deg=50.0)
     with pytest.raises(LimitsError, match=r"ramp_rate_deg_s .* must not exceed"):
-        ActuatorLimits(max_rate_deg_s=2.0, ramp_rate_deg_s=5.0)
+        SafetyLimits(max_rate_deg_s=2.0, ramp_rate_deg_s=5.0)
     with pytest.raises(LimitsError, match="finite"):
-        ActuatorLimits(max_deg=math.nan)
+        SafetyLimits(max_deg=math.nan)
+    with pytest.raises(LimitsError, match="finite"):
+        SafetyLimits(hold_s=math.inf)  # the governor's own fields are checked too
+    with pytest.raises(LimitsError, match="must be a number"):
+        SafetyLimits(max_rate_deg_s=True)
     with pytest.raises(LimitsError, match="unknown actuator limit parameter"):
-        ActuatorLimits.from_mapping({"max_deg": 30.0, "max_speed": 3.0})
-    assert ActuatorLimits.from_mapping(LIMITS.as_dict()) == LIMITS
+        SafetyLimits.from_mapping({"max_deg": 30.0, "max_speed": 3.0})
+    assert SafetyLimits.from_mapping(LIMITS.as_dict()) == LIMITS
+
+
+def test_the_governor_takes_the_actuator_limits_and_their_defaults_from_the_contract() -> None:
+    """One declaration: SafetyLimits extends rig_runtime.interface.ActuatorLimits."""
+    assert issubclass(SafetyLimits, ActuatorLimits)
+    contract = ActuatorLimits()
+    governor = SafetyLimits()
+    assert {k: governor.as_dict()[k] for k in contract.as_dict()} == contract.as_dict()
 
 
 def test_limit_approach_keeps_the_loop_inside_the_limits() -> None:
@@ -188,7 +201,7 @@ def test_limit_approach_keeps_the_loop_inside_the_limits() -> None:
     from pitch_actuator.dynamics import ActuatorModel, ActuatorParams
 
     for approach, overshoots in ((0.0, True), (0.02, False)):
-        limits = ActuatorLimits(
+        limits = SafetyLimits(
             max_deg=35.0, min_deg=-10.0, max_rate_deg_s=150.0, limit_approach_s=approach
         )
         gov = SafetyGovernor(limits, initial_deg=30.0)

@@ -2,7 +2,9 @@
 
 This is the one place the graph's interface is written (docs/design.md §4). Nodes, the view,
 the offline fit, the launch files and the tests take names, types and QoS from here; a topic
-name written as a literal elsewhere is a second copy that can drift.
+name written as a literal elsewhere is a second copy that can drift. The pitch actuator's limits
+(:class:`ActuatorLimits`), which the plan is checked against and the actuator enforces, are part
+of the contract too.
 
 The module imports nothing but the standard library and :mod:`rig_runtime.qos`, so the ROS
 launch files and offline tools can use it without loading a middleware.
@@ -14,9 +16,9 @@ the profile every node of the project uses by default (names from :data:`rig_run
 """
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any, Self
 
 __all__ = [
     "ALPHA_TRUE_JOINT",
@@ -36,6 +38,8 @@ __all__ = [
     "RECORDED_TOPICS",
     "TOPICS",
     "WING_COEFFICIENTS",
+    "ActuatorLimits",
+    "LimitsError",
     "Topic",
     "joint_position",
 ]
@@ -91,7 +95,7 @@ EXPERIMENT_SEGMENT = Topic(
     "/experiment/segment",
     "std_msgs/msg/String",
     "events",
-    "JSON event at each segment boundary of the plan (and plan_end)",
+    "JSON event at each segment boundary of the plan, and plan_end (multisine_gen.plan_format)",
 )
 EXPERIMENT_ANOMALY = Topic(
     "/experiment/anomaly",
@@ -168,3 +172,59 @@ def joint_position(msg: Any, name: str = PITCH_JOINT) -> float | None:
         return None
     value = float(position[index])
     return value if math.isfinite(value) else None
+
+
+class LimitsError(ValueError):
+    """Actuator limits that cannot be used (nothing may move with them)."""
+
+
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """What the pitch actuator accepts, in degrees and seconds as in the parameter files.
+
+    The one declaration of the limits and their defaults: the plan checks
+    (``multisine_gen.plan``), the generator node, both actuator nodes and their safety governor
+    (``pitch_actuator.safety.SafetyLimits`` adds its watchdog and ramp settings) take them from
+    here, and the parameter files in aero_rig/config hold the same values (a test checks).
+
+    Attributes:
+        min_deg, max_deg: allowed pitch range [deg].
+        max_rate_deg_s: largest pitch rate [deg/s].
+
+    Every field must be a finite number, min_deg < max_deg and max_rate_deg_s > 0
+    (LimitsError otherwise); a subclass's fields are checked for being finite numbers too.
+    """
+
+    min_deg: float = -10.0
+    max_deg: float = 35.0
+    max_rate_deg_s: float = 150.0
+
+    def __post_init__(self) -> None:
+        name = type(self).__name__
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise LimitsError(f"{name}.{f.name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise LimitsError(f"{name}.{f.name} must be finite, got {value!r}")
+        if not self.min_deg < self.max_deg:
+            raise LimitsError(
+                f"{name}: min_deg ({self.min_deg}) must be below max_deg ({self.max_deg}); "
+                "fix the parameter file"
+            )
+        if self.max_rate_deg_s <= 0.0:
+            raise LimitsError(f"{name}.max_rate_deg_s must be > 0, got {self.max_rate_deg_s}")
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, object]) -> Self:
+        """Limits from a parameter mapping (e.g. a YAML section); unknown keys are refused."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise LimitsError(
+                f"unknown actuator limit parameter(s) {unknown}; expected some of {sorted(known)}"
+            )
+        return cls(**{k: float(v) for k, v in values.items()})  # type: ignore[arg-type]
+
+    def as_dict(self) -> dict[str, float]:
+        return {f.name: float(getattr(self, f.name)) for f in fields(self)}

@@ -1,4 +1,23 @@
-"""The ``view`` node: subscribes the rig topics and logs them through ``RigViewLogger``."""
+"""Rerun view of a pitching-wing experiment, live (DDS) or from a rosbag.
+
+Shows, on the ``experiment_time`` timeline (the message stamps): commanded and measured pitch
+[deg] and C_l over time; the Cp distribution over the chord (−Cp up, upper and lower surface,
+decimated); on each ``/identification/model`` update the FRF |G| [dB] with its noise and
+nonlinear-distortion variances [dB] per level, the cluster label of every period, the models'
+C_l–α predictions against the measured sine records and the validation table; segment events and
+identification status as text logs. A blueprint lays these out.
+
+Modes: ``save`` writes ``rrd_path``; ``spawn`` starts a Rerun Viewer; ``serve`` runs a gRPC
+server a viewer connects to; ``connect`` streams to a running viewer at ``url``; ``none`` only
+counts messages (not ``off``: YAML reads that as false). With ``rrd_path`` set, every mode
+also saves to that file.
+
+This module imports rerun (numpy >= 2): run it from the project's virtual environment on the
+Cyclone DDS backend, never in an rclpy process (docs/design.md §3). ``RigViewLogger`` has no
+middleware and takes plain messages; ``view_bag`` replays a recorded bag through it.
+
+The ``view`` node subscribes the rig topics and logs them through ``RigViewLogger``.
+"""
 
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
@@ -97,9 +116,7 @@ class View:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from . import __doc__ as description  # --help shows the package docstring
-
-    return run_node(View, "view", PARAMETERS, argv, description=description)
+    return run_node(View, "view", PARAMETERS, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":
