@@ -213,6 +213,10 @@ def test_offline_fit_gives_the_same_table(campaign, tmp_path: Path) -> None:
         "fit", str(run / "bag"), "--out", str(tmp_path / "fit"), env=graph_env(), timeout=600
     )
     assert proc.returncode == 0, proc.stderr
+    # The fit used the parameters recorded with the run, not the defaults.
+    assert "as recorded with the run" in proc.stderr and "overrides: none" in proc.stderr
+    recorded = json.loads((run / "models.json").read_text())["config"]
+    assert json.loads((tmp_path / "fit" / "models.json").read_text())["config"] == recorded
     online = (run / "table1_all_levels.md").read_text().strip()
     offline = (tmp_path / "fit" / "table1_all_levels.md").read_text().strip()
     assert online == offline

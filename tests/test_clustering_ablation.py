@@ -91,7 +91,7 @@ def test_clustering_lowers_the_pnlss_error_on_the_held_out_dominant_periods() ->
 
 
 def test_every_final_report_carries_the_ablation(tmp_path: Path) -> None:
-    _, asm, result = _scenario(2)
+    result = _scenario(2)[2]
     written = write_report(result, tmp_path)
     no_clustering = (tmp_path / "table1_no_clustering.md").read_text()
     assert no_clustering.startswith("| model | low 1 Hz |")

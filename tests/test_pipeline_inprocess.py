@@ -121,7 +121,8 @@ def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> No
     sine = next(s for s in plan["segments"] if s["kind"] == "sine")
     asm = _assemble(campaign)
     clean = identify(asm, IdentificationConfig(max_iter=2), final=True)
-    assert clean.data_quality["clean"] and clean.tables()["table1_all_levels"][0].startswith("| model")
+    assert clean.data_quality["clean"]
+    assert clean.tables()["table1_all_levels"][0].startswith("| model")
     stamp = lambda k: T0 + round(k * 1e9 / plan["fs"])  # noqa: E731
     # A free run over the last sample of period 2 and the first of period 3 of one block ...
     k = seg["start_k"] + seg["length"] - 1

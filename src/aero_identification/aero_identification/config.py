@@ -121,7 +121,9 @@ class IdentificationConfig:
     # with degrees 2-5 costs 15-30 s alone on two cores (README, "PNLSS structure scan"). Each
     # structure is tried from two LM starts (scan.STARTS).
     scan: bool = hyper(True, "final all-levels PNLSS by the cross-validated structure scan")
-    scan_nx: tuple[int, ...] = hyper((1, 2), "scan: state orders", min=1, max=6)
+    scan_nx: tuple[int, ...] = hyper(
+        (1, 2), "scan: state orders (0: the lowest level's linear model order)", min=0, max=12
+    )
     scan_degrees: tuple[tuple[int, ...], ...] = hyper(
         ((2,), (2, 3), (2, 3, 4, 5)), "scan: degree sets, e.g. '2,3' (degrees 2..7)", min=2, max=7
     )

@@ -10,7 +10,8 @@ A source adapter turns its data into a `Dataset` (docs/design.md §7.1):
 `report.write_report` writes one report for all of them.
 """
 
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +47,13 @@ class LevelRecord:
     dropped_periods: int = 0
     excluded: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+
+    @property
+    def periods(self) -> PeriodicData:
+        """``data``, for a level known to have it (ValueError naming the level otherwise)."""
+        if self.data is None:
+            raise ValueError(f"level {self.name} has no usable periods yet")
+        return self.data
 
     @property
     def input_rms(self) -> float:
@@ -86,8 +94,6 @@ class Dataset:
         excluded_sines: sine records left out, each with its reason.
         warnings: what the adapter noticed (a transient, a sine not used), for the report.
         source: one line naming the source (a bag, a directory of CSV files, a live stream).
-        realizations: which realization of the source each of ``data``'s M columns is
-            (a campaign: (estimation, validation)); () when it is 0 … M-1.
     """
 
     fs: float
@@ -109,7 +115,7 @@ class Dataset:
                 return lv
         raise KeyError(name)
 
-    def select(self, tokens: list[str] | tuple[str, ...]) -> list[str]:
+    def select(self, tokens: Sequence[str]) -> list[str]:
         """Names of the levels a user's selectors name (level name, key, file stem or glob);
         ValueError naming the selector that matches nothing."""
         import fnmatch
@@ -134,3 +140,28 @@ class Dataset:
                 raise ValueError(f"level {token!r} matches no level; levels: {names}")
             out += [h for h in hit if h not in out]
         return out
+
+
+def select_levels(
+    dataset: Dataset,
+    estimation: Sequence[str] | None,
+    validation: Sequence[str] | None,
+) -> tuple[Dataset, list[str]]:
+    """The dataset restricted to the user's estimation and validation levels, and the names of
+    the held-out (validation) levels.
+
+    A selector is a level name, key, file stem or glob (`Dataset.select`). Without
+    ``estimation`` every level not held out is estimated; without ``validation`` none is held
+    out. A level in both, a selector matching nothing, or no estimation level left raises
+    ValueError.
+    """
+    names = [lv.name for lv in dataset.levels]
+    held = dataset.select(list(validation)) if validation else []
+    est = dataset.select(list(estimation)) if estimation else [n for n in names if n not in held]
+    both = sorted(set(est) & set(held))
+    if both:
+        raise ValueError(f"level(s) {both} are selected for estimation and for validation")
+    if not est:
+        raise ValueError(f"no estimation level left (levels: {names})")
+    keep = set(est) | set(held)
+    return replace(dataset, levels=[lv for lv in dataset.levels if lv.name in keep]), held

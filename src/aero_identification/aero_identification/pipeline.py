@@ -190,9 +190,12 @@ def _identify(
     if final and config.clustering and config.clustering_ablation:
         t0 = time.perf_counter()
         plain = dataclasses.replace(config, clustering=False, clustering_ablation=False)
-        result.no_clustering = identify(
-            dataset, plain, final=True, client=client, held_out=held_out, log=say
-        )
+        if any(lv.clusters is not None and lv.clusters.k > 1 for lv in result.levels.values()):
+            result.no_clustering = identify(
+                dataset, plain, final=True, client=client, held_out=held_out, log=say
+            )
+        else:  # one cluster everywhere: every valid period was used, the same identification
+            result.no_clustering = dataclasses.replace(result, config=plain)
         result.clustering_effect = clustering_effect(result, result.no_clustering)
         result.timings_s["no_clustering"] = time.perf_counter() - t0
     _finish(dataset, result, t_start)
@@ -383,7 +386,7 @@ def _scan(
     say: Log,
 ) -> ScanResult | None:
     """The all-levels PNLSS by the cross-validated structure scan (scan.py) on `_fit`'s sets:
-    every order of ``config.scan_nx`` (empty: the lowest level's linear order) started from the
+    every order of ``config.scan_nx`` (0: the lowest level's linear order) started from the
     lowest level's BLA; candidates whose Jacobian would exceed MAX_JACOBIAN_BYTES are left out
     and named."""
     data, validation, how = pnlss_sets(levels, config)
@@ -395,7 +398,7 @@ def _scan(
         return None
     if low.bla is None or lin is None:
         return None
-    orders = sorted(set(config.scan_nx)) or [lin.nx]
+    orders = sorted({lin.nx if n == 0 else n for n in config.scan_nx})
     degree_sets = sorted({tuple(d) for d in config.scan_degrees}, key=lambda d: (len(d), d))
     equations = tuple(config.scan_equations)
 
@@ -434,7 +437,7 @@ def _scan(
             with Client(config.scan_scheduler, timeout="30s") as remote:
                 return _scan(levels, result, config, remote, say)
         linear = {
-            n: (lin if n == lin.nx and not config.scan_nx else
+            n: (lin if n == lin.nx and 0 in config.scan_nx else
                 fit_linear_ss(low.bla, nx=n).with_operating_point(u0, y0))
             for n in orders
         }  # fmt: skip

@@ -465,6 +465,7 @@ def read_records(
         RecordError: as `read_record`; SamplingRateError when files disagree on fs;
         ValueError when two files give the same level name or the periods differ.
     """
+    files = find_files(source, fmt, patterns)
     records = [
         read_record(
             f,
@@ -477,24 +478,24 @@ def read_records(
             drop_periods=drop_periods,
             band=band,
         )
-        for f in find_files(source, fmt, patterns)
+        for f in files
     ]
-    first = records[0]
-    for rec in records[1:]:
-        if not math.isclose(rec.data.fs, first.data.fs, rel_tol=1e-9):
+    first, first_file = records[0], files[0]
+    for rec, file in zip(records[1:], files[1:], strict=True):
+        if not math.isclose(rec.periods.fs, first.periods.fs, rel_tol=1e-9):
             raise SamplingRateError(
-                rec.path,
-                f"fs = {rec.data.fs:g} Hz, but {first.path.name} has {first.data.fs:g} Hz; all "
-                "levels must share one sampling frequency",
+                file,
+                f"fs = {rec.periods.fs:g} Hz, but {first_file.name} has {first.periods.fs:g} Hz; "
+                "all levels must share one sampling frequency",
             )
     names: dict[str, Path] = {}
-    for rec in records:
+    for rec, file in zip(records, files, strict=True):
         if rec.name in names:
             raise ValueError(
-                f"{names[rec.name].name} and {rec.path.name} both give level {rec.name!r}; "
+                f"{names[rec.name].name} and {file.name} both give level {rec.name!r}; "
                 "select one with --levels"
             )
-        names[rec.name] = rec.path
+        names[rec.name] = file
     return records
 
 

@@ -45,10 +45,10 @@ def test_csv_record_is_cut_into_periods_with_fs_from_the_first_row(tmp_path: Pat
     path = _write_csv(tmp_path / "Data_Level4.csv", u, y, {0: "400"})
     rec = read_record(path, "csv", "Force", "Acc", N)
     assert rec.name == "4"
-    assert rec.data.u.shape == (N, 3, 1)
-    assert rec.data.fs == 400.0
-    np.testing.assert_array_equal(rec.data.u[:, 1, 0], u[N : 2 * N])
-    np.testing.assert_array_equal(rec.data.excited_lines, LINES)
+    assert rec.periods.u.shape == (N, 3, 1)
+    assert rec.periods.fs == 400.0
+    np.testing.assert_array_equal(rec.periods.u[:, 1, 0], u[N : 2 * N])
+    np.testing.assert_array_equal(rec.periods.excited_lines, LINES)
     assert rec.dropped_periods == 0
 
 
@@ -56,7 +56,7 @@ def test_drop_periods_only_when_asked_and_reported(tmp_path: Path) -> None:
     u, y = _signals(P=4)
     path = _write_csv(tmp_path / "a.csv", u, y, {0: "100"})
     rec = read_record(path, "csv", "Force", "Acc", N, drop_periods=1)
-    assert rec.data.P == 3 and rec.periods_in_file == 4 and rec.dropped_periods == 1
+    assert rec.periods.P == 3 and rec.periods_in_file == 4 and rec.dropped_periods == 1
     assert any("dropped the first 1 period" in n for n in rec.notes)
 
 
@@ -64,8 +64,8 @@ def test_csv_realizations_are_consecutive_blocks(tmp_path: Path) -> None:
     u, y = _signals(P=2, M=3)
     path = _write_csv(tmp_path / "a.csv", u, y, {0: "100"})
     rec = read_record(path, "csv", "Force", "Acc", N, realizations=3)
-    assert rec.data.u.shape == (N, 2, 3)
-    np.testing.assert_array_equal(rec.data.u[:, 0, 2], u[4 * N : 5 * N])
+    assert rec.periods.u.shape == (N, 2, 3)
+    np.testing.assert_array_equal(rec.periods.u[:, 0, 2], u[4 * N : 5 * N])
 
 
 def test_a_record_of_no_whole_periods_is_refused(tmp_path: Path) -> None:
@@ -107,7 +107,7 @@ def test_fs_conflicts_are_refused(tmp_path: Path) -> None:
     none = _write_csv(tmp_path / "none.csv", u, y, {})
     with pytest.raises(SamplingRateError, match="give --fs"):
         read_record(none, "csv", "Force", "Acc", N)
-    assert read_record(none, "csv", "Force", "Acc", N, fs=50.0).data.fs == 50.0
+    assert read_record(none, "csv", "Force", "Acc", N, fs=50.0).periods.fs == 50.0
 
 
 def test_levels_with_different_fs_are_refused(tmp_path: Path) -> None:
@@ -125,11 +125,11 @@ def test_mat_v5_vector_and_matrix_layouts(tmp_path: Path) -> None:
     path = tmp_path / "meas.mat"
     scipy.io.savemat(path, {"u": u.reshape(2, -1).T, "y": y.reshape(2, -1).T, "fs": 1000.0})
     rec = read_record(path, "mat", "u", "y", N)
-    assert rec.data.u.shape == (N, 2, 2) and rec.data.fs == 1000.0
-    np.testing.assert_array_equal(rec.data.u[:, 1, 1], u[3 * N : 4 * N])
+    assert rec.periods.u.shape == (N, 2, 2) and rec.periods.fs == 1000.0
+    np.testing.assert_array_equal(rec.periods.u[:, 1, 1], u[3 * N : 4 * N])
     scipy.io.savemat(path, {"u": u[None, :], "y": y[None, :]})  # 1 × T row vectors
     rec = read_record(path, "mat", "u", "y", N, fs=10.0, realizations=2)
-    assert rec.data.u.shape == (N, 2, 2)
+    assert rec.periods.u.shape == (N, 2, 2)
     with pytest.raises(MissingColumnError, match=r"'out'.*\['u', 'y'\]"):
         read_record(path, "mat", "u", "out", N, fs=10.0)
 
@@ -146,8 +146,8 @@ def test_mat_v73_via_h5py_and_its_errors(tmp_path: Path) -> None:
         head = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1 00:00:00 2024 HDF5"
         fh.write(head.ljust(116) + b"\x00" * 8 + b"\x00\x02" + b"IM")
     rec = read_record(path, "mat", "u", "y", N)
-    assert rec.data.u.shape == (N, 3, 1) and rec.data.fs == 250.0
-    np.testing.assert_allclose(rec.data.u, npm_u)
+    assert rec.periods.u.shape == (N, 3, 1) and rec.periods.fs == 250.0
+    np.testing.assert_allclose(rec.periods.u, npm_u)
     with h5py.File(path, "r+") as fh:
         data = fh["y"][()]
         data[0, 1, 5] = np.inf

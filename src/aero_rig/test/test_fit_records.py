@@ -57,7 +57,7 @@ def test_f16_bla_and_linear_models_from_the_cli(tmp_path: Path) -> None:
     f_first, _ = _peak(levels["1"], 4.5, 6.0)
     assert 5.1 < f_first < 5.3
     # The wing-torsion mode near 7.3 Hz is in the level-1 linear model...
-    modes = levels["1"]["linear"]["modal_frequencies_hz"]
+    modes = levels["1"]["bla_ss"]["modal_frequencies_hz"]
     assert any(7.2 < f < 7.4 for f in modes), modes
     # ... and softens and flattens as the level rises (the nonlinear wing-payload connection).
     f1, g1 = _peak(levels["1"], 6.5, 8.0)
@@ -78,7 +78,7 @@ def test_f16_bla_and_linear_models_from_the_cli(tmp_path: Path) -> None:
 def test_f16_pnlss_improves_on_the_linear_models(tmp_path: Path) -> None:
     assert F16_DIR is not None
     out = tmp_path / "f16"
-    args = ["--pnlss-structure", "statesonly", "--pnlss-degrees", "3", "--pnlss-iter", "20"]
+    args = ["--structure", "statesonly", "--degrees", "3", "--max-iter", "20"]
     assert main(["fit", F16_DIR, *F16_ARGS, *args, "--out", str(out)]) == 0
     for row in _errors(out).values():
         assert float(row["pnlss"]) < 0.9 * float(row["linear_nearest"]), row
@@ -113,8 +113,65 @@ def test_fit_help_explains_every_record_option() -> None:
     for option in (
         "--format", "--input", "--output", "--fs", "--period", "--levels", "--estimation",
         "--validation", "--nx", "--max-order", "--drop-periods", "--realizations", "--band",
-        "--no-pnlss", "--pnlss-degrees", "--pnlss-structure", "--pnlss-iter", "--out",
+        "--no-pnlss", "--degrees", "--structure", "--max-iter", "--scan-degrees", "--out",
     ):  # fmt: skip
         assert option in text
     for action in sub._actions:
         assert action.help, action.option_strings
+
+
+def _write_level(path: Path, gain: float, amplitude: float, seed: int) -> None:
+    """One level: 2 realizations × 4 periods of a random-phase odd multisine through a
+    first-order system with a cubic static nonlinearity, plus noise (CSV, fs column)."""
+    rng = np.random.default_rng(seed)
+    N, P, M = 256, 4, 2
+    lines = np.arange(1, 40, 2)
+    rows = ["u,y,fs"]
+    for _ in range(M):
+        spectrum = np.zeros(N // 2 + 1, complex)
+        spectrum[lines] = np.exp(2j * np.pi * rng.random(lines.size))
+        period = np.fft.irfft(spectrum, N)
+        u = np.tile(amplitude * period / period.std(), P + 1)
+        x = np.zeros_like(u)
+        for t in range(1, u.size):
+            x[t] = 0.8 * x[t - 1] + gain * u[t - 1]
+        y = x + 0.05 * x**3 + 1e-3 * rng.standard_normal(u.size)
+        for ut, yt in zip(u[N:], y[N:], strict=True):  # the first period settles
+            rows.append(f"{ut:.9g},{yt:.9g},{'' if len(rows) > 1 else '100'}")
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_records_get_the_campaign_report(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A CSV user gets the one pipeline's report: clustering, robust BLA with distortion levels
+    (M = 2), the order scan, PNLSS, held-out validation, the ablation, data quality, summary."""
+    src = tmp_path / "levels"
+    src.mkdir()
+    for k, amplitude in ((1, 0.5), (2, 1.0), (3, 1.5)):
+        _write_level(src / f"sys_Level{k}.csv", 0.2, amplitude, k)
+    out = tmp_path / "fit"
+    args = ["fit", str(src), "--format", "csv", "--input", "u", "--output", "y", "--period"]
+    code = main([*args, "256", "--realizations", "2", "--validation", "2", "--degrees", "3",
+                 "--max-iter", "5",
+                 "--out", str(out)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "defaults for records" in err and "overrides: degrees=[3], max_iter=5" in err
+    models = json.loads((out / "models.json").read_text())
+    assert models["config"]["nx"] == 0 and models["config"]["degrees"] == [3]
+    levels = models["levels"]
+    assert [levels[k]["role"] for k in ("1", "2", "3")] == ["estimation", "held out", "estimation"]
+    for k in ("1", "3"):
+        assert levels[k]["bla"]["method"] == "robust" and levels[k]["clusters"]["k"] >= 1
+        assert levels[k]["bla_ss"]["order_scanned"] is True
+    assert "bla_ss" not in levels["2"]  # held out: no model is fitted to it
+    assert models["models"]["pnlss_all_levels"] is not None
+    assert models["pnlss"]["held_out"] == "realization 1 of each level"
+    assert sorted(_errors(out)) == ["2"]
+    row = _errors(out)["2"]
+    assert float(row["pnlss"]) < float(row["linear_lowest"])
+    for name in ("summary.md", "data_quality.md", "clustering.md", "frf_1.png", "clusters_1.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert not (out / "table1_all_levels.md").exists()  # no sines in records
+    assert "every record read whole" in (out / "data_quality.md").read_text()

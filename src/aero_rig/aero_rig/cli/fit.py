@@ -1,52 +1,78 @@
-"""``aero-rig fit``: offline fit of a recorded bag, or of measured multisine records (CSV/MAT).
+"""``aero-rig fit SOURCE``: the identification pipeline on a recorded bag or on measured
+multisine records (CSV/MAT), one report for both.
 
-    aero-rig fit BAG [--out DIR] [--scan|--no-scan] [--scheduler ADDRESS]
-    aero-rig fit FILE|DIR --format csv|mat --input COL --output COL --period N [--fs HZ] ...
+    aero-rig fit BAG [--estimation L...] [--validation L...] [identification flags] [--out DIR]
+    aero-rig fit FILE|DIR --format csv|mat --input COL --output COL --period N [--fs HZ]
+                 [--levels PATTERN...] [--drop-periods K] [--realizations M] [--band F1 F2] ...
 
-A bag runs the identifier's pipeline (aero_rig.offline); records run the level-by-level fit
-(aero_identification.level_fit), with ``--scan`` on a Dask client (``--scheduler``).
+The source adapter (a bag: aero_rig.offline and aero_identification.campaign_dataset; records:
+aero_identification.records) yields a Dataset; aero_identification.pipeline.identify runs on
+it with the parameters below and aero_identification.report.write_report writes the report.
+The identification flags are generated from the one declaration of the parameters
+(aero_identification.config); those given on the command line are printed as overrides.
 """
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from aero_identification.config import (
+    IdentificationConfig,
+    add_config_arguments,
+    config_from_args,
+)
 from aero_identification.quality import data_quality_lines
 
 from .common import EXIT_NOT_CLEAN, EXIT_OK, EXIT_USAGE
 
+# Records carry no recorded parameters and no sines; where the identifier's defaults (a
+# one-state model of a pitching wing, the final structure scan) do not fit an arbitrary
+# measured system, records start from these instead (then the user's flags apply):
+RECORD_DEFAULTS: dict[str, Any] = {
+    "nx": 0,  # the linear order from the subspace order scan, per level
+    "scan": False,  # one PNLSS structure unless --scan
+    "scan_nx": (0,),  # with --scan: at the linear model's order
+}
+
 FIT_DESCRIPTION = """\
-Without --format the source is a rosbag2 recording of a campaign (the identifier's pipeline).
+The source is a rosbag2 recording of a campaign (without --format), or measured periodic
+multisine data (--format csv|mat): one file per level, each M realizations x P periods of N
+samples of one input and one output. CSV: a header row, one sample per row, the realizations
+one after another; MAT (v5/v7 and v7.3): vectors of M*P*N samples, (T, M) samples x
+realizations, or (N, P, M) arrays.
 
-With --format csv|mat the source is measured periodic multisine data: one file per level, each
-M realizations x P periods of N samples of one input and one output. CSV: a header row, one
-sample per row, the realizations one after another; MAT (v5/v7 and v7.3): vectors of M*P*N
-samples, (T, M) samples x realizations, or (N, P, M) arrays. Per level: the BLA with its noise
-level (and, with M >= 2, the nonlinear distortion level), a linear state-space model of it; one
-PNLSS model over the estimation levels; validation errors on the held-out levels. Bad input
-(a column not in the file, a record that is not whole periods, NaN or empty cells, conflicting
-sampling frequencies) stops with exit code 2 and names the file and column. The PNLSS default
-(the identifier's: full structure, degrees 2-5) is refused above a 1 GB Jacobian (a warning;
-the rest of the report is written): choose a smaller setting for high orders, as below.
+Both go through the one pipeline and get the same report: per level the period clustering, the
+BLA with its noise level (and, with M >= 2, the nonlinear distortion level; with M = 1 the LPM)
+and a linear state-space model; one PNLSS model over the estimation levels (or the structure
+scan's choice); Table 1 on the sine records (bags) and the errors on held-out levels
+(--validation); the same pipeline without clustering; data_quality.md, summary.md, figures.
 
-example (F-16 ground vibration test, docs/real_data.md; 25 s on 2 cores):
+Parameters: a bag is fitted with the identifier's parameters recorded in it (its
+/identification/model messages; the defaults for a bag without them); records start from the
+defaults with nx 0 (order scan) and --no-scan. Flags override either, and are printed. Bad
+input (a column not in the file, a record that is not whole periods, NaN or empty cells,
+conflicting sampling frequencies, a bad parameter) stops with exit code 2 and names it; a bag
+that lost or excluded data exits 3 unless --allow-excluded. A PNLSS setting whose
+Levenberg-Marquardt Jacobian would exceed 1 GB is refused with a warning (the rest of the
+report is written).
+
+example (F-16 ground vibration test, docs/real_data.md; about 25 s on 2 cores):
   aero-rig fit DIR --format csv --input Force --output Acceleration2 --period 8192 \\
       --estimation 1 3 5 7 --validation 2 4 6 --drop-periods 1 \\
-      --pnlss-structure statesonly --pnlss-degrees 3 --pnlss-iter 20 --out runs/f16
+      --structure statesonly --degrees 3 --max-iter 20 --out runs/f16
 """
 
 
 def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "fit",
-        help="offline fit of a recorded bag, or of measured multisine records (CSV/MAT)",
+        help="identify a recorded bag or measured multisine records (CSV/MAT)",
         description=FIT_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "bag",
+        "source",
         metavar="BAG|FILE|DIR",
         help="rosbag2 directory; with --format: one record file (one level) or a directory of "
         "them (one level per file)",
@@ -59,26 +85,23 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument(
         "--allow-excluded",
         action="store_true",
-        help="bags only: exit 0 even if data were lost or excluded (they are still listed)",
+        help="exit 0 even if data were lost or excluded (they are still listed)",
     )
     p.add_argument(
-        "--scan",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="choose the PNLSS structure by the cross-validated scan (docs/design.md §7.6). "
-        "Bags: on by default, as the identifier (config/identifier.yaml: nx 1-2, degrees 2 | "
-        "2,3 | 2..5, monomials in the state or in state and output); --no-scan fits the one "
-        "structure. Records: off by default; --scan scans at the linear order, degree sets "
-        "2..D for each --pnlss-degrees D (default 2 3), both equation sets. Report: "
-        "pnlss_scan.md|csv|png",
+        "--estimation",
+        nargs="+",
+        metavar="LEVEL",
+        help="levels to fit (names such as 'low' or '3', plan level numbers, file stems or "
+        "globs); default: every level not in --validation",
     )
     p.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="with --scan: run the fits on this Dask scheduler (e.g. tcp://HOST:8786, started "
-        "with `dask scheduler` and `dask worker`); default: a local cluster, one worker "
-        "process per core",
+        "--validation",
+        nargs="+",
+        metavar="LEVEL",
+        help="held-out levels, kept out of every fit and used only for validation errors "
+        "(validation_errors.md|csv); default: none",
     )
+    add_config_arguments(p.add_argument_group("identification parameters (config.py)"))
     _add_record_options(p)
     p.set_defaults(func=main)
 
@@ -117,34 +140,6 @@ def _add_record_options(p: argparse.ArgumentParser) -> None:
         "level is named k when its file stem contains 'Level<k>', else by the stem",
     )
     g.add_argument(
-        "--estimation",
-        nargs="+",
-        metavar="LEVEL",
-        help="levels to fit (level names, file stems or globs); default: every level not in "
-        "--validation",
-    )
-    g.add_argument(
-        "--validation",
-        nargs="+",
-        metavar="LEVEL",
-        help="held-out levels, used only for the validation errors; default: every level not "
-        "in --estimation",
-    )
-    g.add_argument(
-        "--nx",
-        type=int,
-        metavar="N",
-        help="order of the linear models (and the PNLSS); default: chosen per level by the "
-        "subspace order scan (MDL-type penalty) over 1 ... --max-order",
-    )
-    g.add_argument(
-        "--max-order",
-        type=int,
-        default=12,
-        metavar="N",
-        help="highest order of the order scan without --nx (default 12)",
-    )
-    g.add_argument(
         "--drop-periods",
         type=int,
         metavar="K",
@@ -167,177 +162,131 @@ def _add_record_options(p: argparse.ArgumentParser) -> None:
         help="restrict the excited-line detection to FMIN ... FMAX Hz (default: every bin "
         "within 20 dB of the median strong input line)",
     )
-    g.add_argument("--no-pnlss", action="store_true", help="skip the PNLSS model")
-    g.add_argument(
-        "--pnlss-degrees",
-        type=int,
-        nargs="+",
-        metavar="D",
-        help="PNLSS monomial degrees (each >= 2; default 2 3 4 5, the identifier's)",
-    )
-    g.add_argument(
-        "--pnlss-structure",
-        choices=("full", "statesonly", "inputsonly"),
-        help="monomials of states and input (full, default), of the states only, or of the "
-        "input only (cheapest)",
-    )
-    g.add_argument(
-        "--pnlss-iter",
-        type=int,
-        metavar="K",
-        help="Levenberg-Marquardt iterations of the PNLSS fit (default 100)",
-    )
+
+
+RECORD_OPTIONS = ("input", "output", "fs", "period", "levels", "drop_periods", "realizations",
+                  "band")  # fmt: skip
+
+
+def _say(message: str) -> None:
+    print(f"aero-rig fit: {message}", file=sys.stderr)
 
 
 def main(args: argparse.Namespace) -> int:
-    if args.format is not None:
-        return fit_records(args)
-    used = [opt for opt, value in _record_options(args).items() if value]
-    if used:
-        print(
-            f"aero-rig fit: {', '.join(used)} apply to measured records; add --format csv|mat "
-            "(without --format the source is a bag)",
-            file=sys.stderr,
-        )
-        return EXIT_USAGE
-    from aero_identification.config import IdentificationConfig
-
-    from ..offline import BagError, fit_bag
-
-    out = Path(args.out) if args.out else Path(args.bag).resolve().parent / "offline_fit"
-    config = IdentificationConfig(scan_scheduler=args.scheduler or "")
-    if args.scan is not None:
-        config = replace(config, scan=args.scan)
+    if args.format is None:
+        used = [f"--{o.replace('_', '-')}" for o in RECORD_OPTIONS if getattr(args, o)]
+        if used:
+            _say(
+                f"{', '.join(used)} apply to measured records; add --format csv|mat (without "
+                "--format the source is a bag)"
+            )
+            return EXIT_USAGE
     try:
-        result, data = fit_bag(args.bag, out, config)
-    except BagError as exc:
-        print(f"aero-rig fit: {exc}", file=sys.stderr)
+        loaded = _load_bag(args) if args.format is None else _load_records(args)
+    except ValueError as exc:  # BagError, RecordError, bad selections and parameters
+        _say(str(exc))
         return EXIT_USAGE
-    if result.scan is not None:
-        print(f"PNLSS structure scan ({result.scan.workers}, {result.scan.seconds:.1f} s):")
-        print(result.scan.to_markdown())
-    for warning in result.warnings:
-        print(f"aero-rig fit: warning: {warning}", file=sys.stderr)
-    tables = result.tables()
-    print(f"{data.messages} samples read from {args.bag}")
+    dataset, held_out, config, out, warnings = loaded
+    from aero_identification.pipeline import identify
+    from aero_identification.report import write_report
+
+    result = identify(dataset, config, final=True, held_out=held_out, log=_say)
+    result.warnings[:0] = warnings
+    write_report(result, out)
+    return _print_result(result, out, args.allow_excluded)
+
+
+def _overrides(args: argparse.Namespace, base: IdentificationConfig, where: str) -> Any:
+    config, given = config_from_args(args, base)
+    shown = ", ".join(f"{k}={v}" for k, v in given.items()) or "none"
+    _say(f"parameters: {where}; command-line overrides: {shown}")
+    return config
+
+
+def _load_bag(args: argparse.Namespace) -> Any:
+    from aero_identification.campaign_dataset import campaign_dataset
+    from aero_identification.dataset import select_levels
+
+    from ..offline import read_campaign_bag, recorded_config
+
+    data = read_campaign_bag(args.source)
+    base = recorded_config(data)
+    where = (
+        "as recorded with the run (/identification/model in the bag)"
+        if data.recorded_config is not None
+        else "the identifier's defaults (the bag holds no /identification/model)"
+    )
+    config = _overrides(args, base, where)
+    print(f"{data.messages} samples read from {args.source}")
     print("realizations in the bag (valid periods / periods):")
     for (level, m), block in sorted(data.assembler.blocks.items()):
         valid = int(block.period_valid().sum())
         state = "complete" if valid == block.P else ("incomplete" if valid else "none")
         print(f"  level {level} realization {m}: {valid}/{block.P} ({state})")
-    print("\nTable 1, trained on all levels:")
-    print(tables["all_levels"][0])
-    print("\nTable 1, trained on level 1 only:")
-    print(tables["level1"][0])
-    if "no_clustering" in tables:
-        print("\nTable 1, trained on all levels, without clustering (every valid period):")
-        print(tables["no_clustering"][0])
-    print(f"\nreport: {out.resolve()}")
+    dataset = campaign_dataset(
+        data.assembler, final=True, min_periods=config.min_periods, source=f"bag {args.source}"
+    )
+    dataset, held_out = select_levels(dataset, args.estimation, args.validation)
+    out = Path(args.out) if args.out else Path(args.source).resolve().parent / "offline_fit"
+    return dataset, held_out, config, out, data.warnings
+
+
+def _load_records(args: argparse.Namespace) -> Any:
+    from aero_identification.dataset import select_levels
+    from aero_identification.records import read_records, records_dataset
+
+    missing = [f"--{o}" for o in ("input", "output", "period") if getattr(args, o) is None]
+    if missing:
+        raise ValueError(f"--format {args.format} needs {', '.join(missing)}")
+    base = IdentificationConfig.from_dict(RECORD_DEFAULTS)
+    config = _overrides(args, base, "the defaults for records (nx 0: order scan; no scan)")
+    source = Path(args.source)
+    records = read_records(
+        source, args.format, args.input, args.output, args.period, args.fs,
+        patterns=args.levels, realizations=args.realizations or 1,
+        drop_periods=args.drop_periods or 0, band=tuple(args.band) if args.band else None,
+    )  # fmt: skip
+    for rec in records:
+        where = rec.path.name if rec.path is not None else rec.name
+        _say(f"level {rec.name} <- {where}: " + "; ".join(rec.notes))
+    dataset, held_out = select_levels(
+        records_dataset(records, source=str(source)), args.estimation, args.validation
+    )
+    out = Path(args.out) if args.out else source.resolve().parent / f"fit_{source.stem}"
+    return dataset, held_out, config, out, []
+
+
+TITLES = {
+    "table1_all_levels": "Table 1, trained on all levels (estimation: one realization per level):",
+    "table1_level1": "Table 1, trained on level 1 only (the paper's variant):",
+    "table1_no_clustering": "Table 1, trained on all levels, without clustering (every valid "
+    "period):",
+    "validation_errors": "Validation on held-out levels (relative RMS error "
+    "rms(y - yhat)/rms(y - mean y)):",
+    "validation_errors_no_clustering": "Held-out levels, without clustering:",
+}
+
+
+def _print_result(result: Any, out: Path, allow_excluded: bool) -> int:
+    if result.scan is not None:
+        print(f"PNLSS structure scan ({result.scan.workers}, {result.scan.seconds:.1f} s):")
+        print(result.scan.to_markdown())
+    for warning in result.warnings:
+        _say(f"warning: {warning}")
+    estimation = [n for n, lv in result.levels.items() if lv.role == "estimation"]
+    held = [n for n, lv in result.levels.items() if lv.role != "estimation"]
+    print(f"estimation levels {estimation}, held-out levels {held}")
+    for key, (markdown, _) in result.tables().items():
+        print(f"\n{TITLES.get(key, key)}")
+        print(markdown)
+    print(f"report: {out.resolve()}  (summary.md, models.json, data_quality.md, tables, *.png)")
     problems = data_quality_lines(result.data_quality)
     if problems:
-        print(f"\nDATA NOT CLEAN: {len(problems)} problem(s); Table 1 uses only what was left:")
+        print(f"\nDATA NOT CLEAN: {len(problems)} problem(s); the tables use only what was left:")
         for line in problems[:40]:
             print(f"  - {line}")
-        if not args.allow_excluded:
-            print(
-                "aero-rig fit: the bag lost or excluded data (above); exit code 3. Pass "
-                "--allow-excluded to accept it.",
-                file=sys.stderr,
-            )
+        if not allow_excluded:
+            _say("the source lost or excluded data (above); exit code 3. Pass --allow-excluded "
+                 "to accept it.")  # fmt: skip
             return EXIT_NOT_CLEAN
     return EXIT_OK
-
-
-def _record_options(args: argparse.Namespace) -> dict[str, Any]:
-    return {
-        "--input": args.input,
-        "--output": args.output,
-        "--fs": args.fs,
-        "--period": args.period,
-        "--levels": args.levels,
-        "--estimation": args.estimation,
-        "--validation": args.validation,
-        "--nx": args.nx,
-        "--drop-periods": args.drop_periods,
-        "--realizations": args.realizations,
-        "--band": args.band,
-        "--no-pnlss": args.no_pnlss,
-        "--pnlss-degrees": args.pnlss_degrees,
-        "--pnlss-structure": args.pnlss_structure,
-        "--pnlss-iter": args.pnlss_iter,
-    }
-
-
-def fit_records(args: argparse.Namespace) -> int:
-    """``aero-rig fit FILE|DIR --format csv|mat``: measured multisine records, level by level."""
-    from aero_identification.level_fit import error_table, identify_levels, write_level_report
-    from aero_identification.records import read_records
-
-    missing = [o for o, v in (("--input", args.input), ("--output", args.output),
-                              ("--period", args.period)) if v is None]  # fmt: skip
-    if missing:
-        print(f"aero-rig fit: --format {args.format} needs {', '.join(missing)}", file=sys.stderr)
-        return EXIT_USAGE
-    if args.allow_excluded:
-        print("aero-rig fit: --allow-excluded applies to bags only", file=sys.stderr)
-        return EXIT_USAGE
-    source = Path(args.bag)
-    out = Path(args.out) if args.out else source.resolve().parent / f"fit_{source.stem}"
-    options: dict[str, Any] = {}
-    if args.pnlss_degrees:
-        options["degrees"] = tuple(args.pnlss_degrees)
-    if args.pnlss_structure:
-        options["structure"] = args.pnlss_structure
-    if args.pnlss_iter is not None:
-        options["max_iter"] = args.pnlss_iter
-    nonlinear = _record_scan(args)
-
-    def log(message: str) -> None:
-        print(f"aero-rig fit: {message}", file=sys.stderr)
-
-    try:
-        records = read_records(
-            source, args.format, args.input, args.output, args.period, args.fs,
-            patterns=args.levels, realizations=args.realizations or 1,
-            drop_periods=args.drop_periods or 0,
-            band=tuple(args.band) if args.band else None,
-        )  # fmt: skip
-        for rec in records:
-            log(f"level {rec.name} <- {rec.path.name}: " + "; ".join(rec.notes))
-        result = identify_levels(
-            records, args.estimation, args.validation, nx=args.nx,
-            max_order=args.max_order, pnlss=not args.no_pnlss, pnlss_options=options, log=log,
-            **({"fit_nonlinear": nonlinear} if nonlinear is not None else {}),
-        )  # fmt: skip
-    except ValueError as exc:  # RecordError and bad selections are ValueErrors
-        print(f"aero-rig fit: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    write_level_report(result, out)
-    for warning in result.warnings:
-        print(f"aero-rig fit: warning: {warning}", file=sys.stderr)
-    print(f"estimation levels {result.estimation}, validation levels {result.validation}")
-    print("\nValidation on held-out levels (relative RMS error rms(y - yhat)/rms(y - mean y)):")
-    print(error_table(result)[0])
-    print(f"report: {out.resolve()}  (summary.md, validation_errors.md|csv, models.json, *.png)")
-    return EXIT_OK
-
-
-def _record_scan(args: argparse.Namespace) -> Any:
-    """``--scan`` for measured records: the structure scan at the linear order (ScanFit)."""
-    if not args.scan:
-        return None
-    from aero_identification.level_fit import ScanFit
-
-    client = None
-    if args.scheduler:
-        from dask.distributed import Client
-
-        client = Client(args.scheduler, timeout="30s")
-    return ScanFit(
-        degrees=[
-            (d,) if d == 2 else tuple(range(2, d + 1)) for d in (args.pnlss_degrees or [2, 3])
-        ],
-        structure=args.pnlss_structure or "full",
-        max_iter=args.pnlss_iter or 50,
-        client=client,
-    )
