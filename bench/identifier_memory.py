@@ -18,7 +18,6 @@ import argparse
 import json
 import pickle
 import time
-from typing import Any
 
 import numpy as np
 
@@ -27,20 +26,21 @@ from aero_identification.campaign import CampaignAssembler
 from aero_identification.config import IdentificationConfig
 from aero_rig.simulation import simulate_plan
 from multisine_gen.campaigns import default_plan, short_plan
+from multisine_gen.plan import ExperimentPlan
 
 
-def refit_points(assembler: CampaignAssembler, plan: dict[str, Any]) -> list[tuple[int, bool, str]]:
+def refit_points(assembler: CampaignAssembler, plan: ExperimentPlan) -> list[tuple[int, bool, str]]:
     """(end sample index, models change, label) of each refit the node starts, in order."""
     points = []
-    for seg in plan["segments"]:
-        end = int(seg["start_k"]) + int(seg["length"])
-        if seg["kind"] == "multisine":
-            block = assembler.blocks[(int(seg["level"]), int(seg["realization"]))]
-            if int(seg["period"]) == block.P - 1:
-                label = f"level {seg['level']} realization {seg['realization']}"
+    for seg in plan.segments:
+        end = seg.stop_k
+        if seg.kind == "multisine" and seg.level is not None and seg.realization is not None:
+            block = assembler.blocks[(seg.level, seg.realization)]
+            if seg.period == block.P - 1:
+                label = f"level {seg.level} realization {seg.realization}"
                 points.append((end, True, label))
-        elif seg["kind"] == "sine":
-            points.append((end, False, f"sine {seg['frequency_hz']:g} Hz"))
+        elif seg.kind == "sine":
+            points.append((end, False, f"sine {seg.frequency_hz:g} Hz"))
     return points
 
 

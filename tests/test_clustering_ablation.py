@@ -58,11 +58,14 @@ def _scenario(seed: int) -> tuple[SimulatedRun, CampaignAssembler, Identificatio
 
 def _light_periods(run: SimulatedRun, level: int) -> np.ndarray:
     """(P, M) bool: the period's majority regime is the light one (plant truth)."""
-    segments = [s for s in run.plan["segments"] if s["kind"] == "multisine" and s["level"] == level]
-    share = np.zeros((max(s["period"] for s in segments) + 1, 2))
-    for s in segments:
-        stop = s["start_k"] + s["length"]
-        share[s["period"], s["realization"]] = run.light_stall[s["start_k"] : stop].mean()
+    periods = [
+        (s.period, s.realization, s.start_k, s.stop_k)
+        for s in run.plan.segments
+        if s.kind == "multisine" and s.level == level and s.period is not None
+    ]
+    share = np.zeros((max(p for p, *_ in periods) + 1, 2))
+    for period, realization, start, stop in periods:
+        share[period, realization] = run.light_stall[start:stop].mean()
     return share > 0.5
 
 

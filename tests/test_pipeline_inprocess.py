@@ -14,6 +14,7 @@ from aero_identification.results import IdentificationResult
 from aero_rig.simulation import T0_NS as T0
 from aero_rig.simulation import simulate_plan
 from multisine_gen.campaigns import short_plan
+from multisine_gen.plan import ExperimentPlan
 from wing_sim.wing_params import wing_params_preset
 
 
@@ -26,7 +27,7 @@ def identify(
 
 
 @pytest.fixture(scope="module")
-def campaign() -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
+def campaign() -> tuple[ExperimentPlan, np.ndarray, np.ndarray, np.ndarray]:
     # The release-0.1 wing (repeatable high-offset periods): the identification targets below
     # are testable on it (see tests/test_campaign.py, WING).
     run = simulate_plan(short_plan(seed=0), seed=0, params=wing_params_preset("repeatable_stall"))
@@ -48,17 +49,15 @@ def _assemble(campaign, drop: int | None = None, duplicate: int | None = None) -
 
 def test_periods_with_gaps_or_duplicates_are_excluded_and_reported(campaign) -> None:
     plan = campaign[0]
-    seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 1)
-    asm = _assemble(campaign, drop=seg["start_k"] + 17, duplicate=seg["start_k"] + 40)
-    block = asm.blocks[(seg["level"], seg["realization"])]
+    seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 1)
+    asm = _assemble(campaign, drop=seg.start_k + 17, duplicate=seg.start_k + 40)
+    block = asm.blocks[(seg.level, seg.realization)]
     valid = block.period_valid()
     assert not valid[1] and valid[0] and valid[2]
     problem = block.period_problem(1)
     assert "1 pitch samples missing" in problem and "1 C_l samples duplicated" in problem
     result = identify(asm, IdentificationConfig(max_iter=5))
-    excluded = next(
-        lv for lv in result.levels.values() if lv.record.key == str(seg["level"])
-    ).excluded
+    excluded = next(lv for lv in result.levels.values() if lv.record.key == str(seg.level)).excluded
     assert any("period 1" in e and "missing" in e for e in excluded)
 
 
@@ -93,8 +92,8 @@ def test_refits_reuse_unchanged_models_exactly(campaign) -> None:
 
 def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) -> None:
     plan, stamps, u, y = campaign
-    sine = next(s for s in plan["segments"] if s["kind"] == "sine")
-    half = sine["start_k"] + sine["length"] // 2
+    sine = next(s for s in plan.segments if s.kind == "sine")
+    half = sine.start_k + sine.length // 2
     asm = CampaignAssembler(plan, T0)
     asm.add_many("u", stamps[:half], u[:half])
     asm.add_many("y", stamps[:half], y[:half])
@@ -104,9 +103,9 @@ def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) ->
     final = identify(asm, config, final=True, models_from=interim)
     assert any(f"sine {sine['frequency_hz']:g} Hz" in w for w in final.warnings), final.warnings
     # A gap in a record whose last sample is in is a fault at once.
-    end = sine["start_k"] + sine["length"]
+    end = sine.start_k + sine.length
     gap = np.ones(end, dtype=bool)
-    gap[sine["start_k"] + 5] = False
+    gap[sine.start_k + 5] = False
     asm = CampaignAssembler(plan, T0)
     asm.add_many("u", stamps[:end][gap], u[:end][gap])
     asm.add_many("y", stamps[:end], y[:end])
@@ -117,19 +116,19 @@ def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) ->
 
 def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> None:
     plan = campaign[0]
-    seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 2)
-    sine = next(s for s in plan["segments"] if s["kind"] == "sine")
+    seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 2)
+    sine = next(s for s in plan.segments if s.kind == "sine")
     asm = _assemble(campaign)
     clean = identify(asm, IdentificationConfig(max_iter=2), final=True)
     assert clean.data_quality["clean"]
     assert clean.tables()["table1_all_levels"][0].startswith("| model")
-    stamp = lambda k: T0 + round(k * 1e9 / plan["fs"])  # noqa: E731
+    stamp = lambda k: T0 + round(k * 1e9 / plan.fs)  # noqa: E731
     # A free run over the last sample of period 2 and the first of period 3 of one block ...
-    k = seg["start_k"] + seg["length"] - 1
+    k = seg.start_k + seg.length - 1
     asm.add_anomaly("sim_actuator/free_run/1", stamp(k), stamp(k + 1), "sim_actuator free_run")
     # ... and an episode still open from inside the first sine record to the end.
-    asm.add_anomaly("lift/invalid/1", stamp(sine["start_k"] + 3), None, "lift invalid")
-    block = asm.blocks[(seg["level"], seg["realization"])]
+    asm.add_anomaly("lift/invalid/1", stamp(sine.start_k + 3), None, "lift invalid")
+    block = asm.blocks[(seg.level, seg.realization)]
     assert list(np.flatnonzero(~block.period_valid())) == [2, 3]
     assert "sim_actuator free_run" in block.period_problem(2)
     later = [r for r in asm.sines.values() if r.mark]
@@ -149,12 +148,12 @@ def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> No
 
 def test_a_sample_delivered_twice_excludes_nothing(campaign) -> None:
     plan, stamps, u, y = campaign
-    seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 1)
+    seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 1)
     asm = _assemble(campaign)
-    k = seg["start_k"] + 40
+    k = seg.start_k + 40
     asm.add("y", int(stamps[k]), float(y[k]))  # a transport redelivery: identical
     asm.add("u", int(stamps[k]), float(u[k]))
-    assert asm.blocks[(seg["level"], seg["realization"])].period_valid().all()
+    assert asm.blocks[(seg.level, seg.realization)].period_valid().all()
     result = identify(asm, IdentificationConfig(max_iter=2), final=True)
     assert result.data_quality["clean"]
     assert result.data_quality["samples"]["C_l"]["redelivered"] == 1
@@ -164,7 +163,7 @@ def test_every_plan_sample_is_accounted_for(campaign) -> None:
     plan, stamps, u, y = campaign
     asm = _assemble(campaign, drop=10, duplicate=20)
     accounting = asm.sample_accounting(final=True)
-    total = plan["total_samples"]
+    total = plan.total_samples
     assert accounting["pitch"] == {
         "expected": total,
         "received": total - 1,
@@ -245,10 +244,10 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
     ident = Identifier(node)
     try:
         plan, stamps = campaign[0], campaign[1]
-        seg = next(s for s in plan["segments"] if s["kind"] == "multisine" and s["period"] == 1)
+        seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 1)
         ident.assembler = _assemble(campaign)
         ident._start_refit(True, "plan end")
-        late = Anomaly("lift/invalid/1", "lift", "invalid", int(stamps[seg["start_k"] + 5]), None)
+        late = Anomaly("lift/invalid/1", "lift", "invalid", int(stamps[seg.start_k + 5]), None)
         ident.on_anomaly(SimpleNamespace(data=late.to_json()))
         assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
         ident._collect()

@@ -17,6 +17,7 @@ setup(
     package_data={package_name: ["py.typed"]},
     install_requires=[
         "rig_runtime",
+        "multisine_gen",
         "numpy>=1.26",
         "scipy>=1.11",
         "scikit-learn>=1.3",

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from multisine_gen.plan import ExperimentPlan
+
 
 def _count_problems(count_u: np.ndarray, count_y: np.ndarray, u: np.ndarray, y: np.ndarray) -> str:
     problems = []
@@ -129,7 +131,7 @@ class _Slot:
 class CampaignAssembler:
     """Collects measured samples into the plan's periods (see module docstring)."""
 
-    plan: dict[str, Any]
+    plan: ExperimentPlan  # the typed plan (multisine_gen.plan_format.read_plan_message)
     t0_ns: int
     blocks: dict[tuple[int, int], PeriodBlock] = field(default_factory=dict)
     sines: dict[int, SineRecord] = field(default_factory=dict)
@@ -138,9 +140,9 @@ class CampaignAssembler:
     anomalies: dict[str, tuple[int, int | None, str]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.fs = float(self.plan["fs"])
+        self.fs = float(self.plan.fs)
         self.period_ns = 1e9 / self.fs
-        self.total = int(self.plan.get("total_samples") or 0)
+        self.total = int(self.plan.total_samples)
         # How often each plan sample arrived, per channel (saturating at 255), and how many
         # samples fell outside the plan (before t0 or after its last sample).
         self.coverage = {c: np.zeros(self.total, dtype=np.uint8) for c in ("u", "y")}
@@ -151,44 +153,37 @@ class CampaignAssembler:
         self.values = {c: np.full(self.total, np.nan) for c in ("u", "y")}
         self.redelivered = {"u": 0, "y": 0}
         self._slots: list[_Slot] = []
-        for seg in self.plan["segments"]:
-            if seg["kind"] == "multisine" and seg.get("period") is not None:
-                key = (int(seg["level"]), int(seg["realization"]))
+        periods = {lv.level: lv.periods for lv in self.plan.levels}
+        for seg in self.plan.segments:
+            if seg.kind == "multisine" and seg.period is not None:
+                assert seg.level is not None and seg.realization is not None
+                key = (seg.level, seg.realization)
                 if key not in self.blocks:
-                    level = next(lv for lv in self.plan["levels"] if lv["level"] == key[0])
                     self.blocks[key] = PeriodBlock.empty(
                         key[0],
                         key[1],
-                        float(seg["offset_deg"]),
-                        int(seg["samples_per_period"]),
-                        int(level["periods"]),
+                        float(seg.offset_deg or 0.0),
+                        int(seg.samples_per_period or 0),
+                        periods[key[0]],
                     )
-                self._slots.append(
-                    _Slot(
-                        "multisine",
-                        key,
-                        int(seg["start_k"]),
-                        int(seg["length"]),
-                        int(seg["period"]),
-                    )
-                )
-            elif seg["kind"] == "sine":
-                idx = int(seg["sine_test"])
-                n = int(seg["length"])
+                self._slots.append(_Slot("multisine", key, seg.start_k, seg.length, seg.period))
+            elif seg.kind == "sine":
+                assert seg.sine_test is not None and seg.level is not None
+                idx, n = seg.sine_test, seg.length
                 self.sines[idx] = SineRecord(
                     idx,
-                    int(seg["level"]),
-                    float(seg["offset_deg"]),
-                    float(seg["frequency_hz"]),
-                    float(seg["amplitude_deg"]),
-                    int(seg["samples_per_period"]),
-                    int(seg["periods"]),
+                    seg.level,
+                    float(seg.offset_deg or 0.0),
+                    float(seg.frequency_hz or 0.0),
+                    float(seg.amplitude_deg or 0.0),
+                    int(seg.samples_per_period or 0),
+                    seg.periods,
                     np.full(n, np.nan),
                     np.full(n, np.nan),
                     np.zeros(n, dtype=np.int32),
                     np.zeros(n, dtype=np.int32),
                 )
-                self._slots.append(_Slot("sine", idx, int(seg["start_k"]), n, 0))
+                self._slots.append(_Slot("sine", idx, seg.start_k, n, 0))
         self._slots.sort(key=lambda s: s.start_k)
         self._starts = np.array([s.start_k for s in self._slots], dtype=np.int64)
 

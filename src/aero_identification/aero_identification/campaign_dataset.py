@@ -32,8 +32,8 @@ def _valid_periods(block: PeriodBlock) -> np.ndarray:
 
 
 def _excited_lines(assembler: CampaignAssembler, level: int, realization: int) -> np.ndarray:
-    lv = next(x for x in assembler.plan["levels"] if x["level"] == level)
-    return np.asarray(lv["realizations"][realization]["excited_lines"], dtype=int)
+    lv = next(x for x in assembler.plan.levels if x.level == level)
+    return np.asarray(lv.realizations[realization].excited_lines, dtype=int)
 
 
 def campaign_dataset(
@@ -48,7 +48,7 @@ def campaign_dataset(
     for lv, m in sorted(assembler.blocks):
         offsets.setdefault(lv, assembler.blocks[(lv, m)].offset_deg)
         realizations.setdefault(lv, []).append(m)
-    plan_levels = [int(x["level"]) for x in assembler.plan["levels"]]
+    plan_levels = [lv.level for lv in assembler.plan.levels]
     names = level_names(plan_levels, offsets)
     levels: list[LevelRecord] = []
     for level in sorted(plan_levels, key=lambda lv: offsets.get(lv, 0.0)):

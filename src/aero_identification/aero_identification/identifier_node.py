@@ -28,6 +28,8 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+from multisine_gen.plan import PlanError
+from multisine_gen.plan_format import read_plan_message
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 from rig_runtime.anomaly import Anomaly
 from rig_runtime.diagnostics import diagnostic_array
@@ -163,13 +165,18 @@ class Identifier:
 
     # -- intake ---------------------------------------------------------------------------
     def on_plan(self, msg: Any) -> None:
-        plan = json.loads(msg.data)
-        if self.assembler is not None and plan.get("t0_ns") == self.assembler.t0_ns:
+        try:
+            plan, t0_ns = read_plan_message(msg.data)
+        except PlanError as exc:
+            self.node.logger.error("%s: %s; stopping", EXPERIMENT_PLAN.name, exc)
+            self.node.request_shutdown(1)
             return
-        self.assembler = CampaignAssembler(plan, int(plan["t0_ns"]))
+        if self.assembler is not None and t0_ns == self.assembler.t0_ns:
+            return
+        self.assembler = CampaignAssembler(plan, t0_ns)
         self.node.logger.info(
             "plan received: %d segments, %d multisine blocks, %d sine tests",
-            len(plan["segments"]),
+            len(plan.segments),
             len(self.assembler.blocks),
             len(self.assembler.sines),
         )

@@ -21,6 +21,8 @@ from aero_identification.config import IdentificationConfig
 from aero_identification.pipeline import identify
 from aero_identification.report import write_report
 from aero_identification.results import IdentificationResult
+from multisine_gen.plan import ExperimentPlan, PlanError
+from multisine_gen.plan_format import read_plan_message
 from rig_runtime.anomaly import Anomaly
 from rig_runtime.interface import (
     EXPERIMENT_ANOMALY,
@@ -42,7 +44,7 @@ class BagError(ValueError):
 
 @dataclass
 class BagData:
-    plan: dict[str, Any]
+    plan: ExperimentPlan
     assembler: CampaignAssembler
     messages: int = 0
     warnings: list[str] = field(default_factory=list)
@@ -82,13 +84,17 @@ def read_campaign_bag(bag: str | Path) -> BagData:
                 f"bag {path} lacks topic(s) {missing} needed for a fit; it has {sorted(topics)}"
             )
         plan_conns = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
-        plan: dict[str, Any] | None = None
+        message: str | None = None
         for conn, _, raw in reader.messages(connections=plan_conns):
             plan_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
-            plan = json.loads(plan_msg.data)
-        if plan is None or "t0_ns" not in plan:
-            raise BagError(f"bag {path}: /experiment/plan holds no plan with t0_ns")
-        assembler = CampaignAssembler(plan, int(plan["t0_ns"]))
+            message = plan_msg.data
+        if message is None:
+            raise BagError(f"bag {path}: /experiment/plan holds no message")
+        try:
+            plan, t0_ns = read_plan_message(message)
+        except PlanError as exc:
+            raise BagError(f"bag {path}: {exc}") from exc
+        assembler = CampaignAssembler(plan, t0_ns)
         recorded_config = None
         model_conns = [c for c in reader.connections if c.topic == IDENTIFICATION_MODEL.name]
         for conn, _, raw in reader.messages(connections=model_conns):

@@ -5,14 +5,11 @@ stepped in order: fast data for pipeline tests and benchmarks. It leaves out wha
 graph has: the actuator's safety governor and the stream timing.
 """
 
-import json
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from multisine_gen.plan import ExperimentPlan
-from multisine_gen.plan_format import plan_to_json
 from pitch_actuator.dynamics import ActuatorModel
 from pressure_scanner.integration import PressureIntegrator
 from wing_sim.plant import WingPlant
@@ -23,7 +20,7 @@ T0_NS = 1_700_000_000_000_000_000  # the plan's t0 for simulated runs
 
 @dataclass
 class SimulatedRun:
-    plan: dict[str, Any]  # the plan's JSON form, as /experiment/plan carries it
+    plan: ExperimentPlan
     stamps_ns: np.ndarray  # t0 + k/fs
     pitch_deg: np.ndarray  # measured pitch (the identification input)
     cl: np.ndarray  # C_l by pressure integration (the output)
@@ -46,6 +43,4 @@ def simulate_plan(
     integrator = PressureIntegrator(plant.taps)
     cl = integrator.integrate(pressures, pitch, plant.dynamic_pressure_pa).cl
     stamps = T0_NS + np.round(np.arange(len(command)) * 1e9 / plan.fs).astype(np.int64)
-    return SimulatedRun(
-        json.loads(plan_to_json(plan)), stamps, np.degrees(pitch), cl, truth.light_stall.copy()
-    )
+    return SimulatedRun(plan, stamps, np.degrees(pitch), cl, truth.light_stall.copy())

@@ -162,9 +162,9 @@ def test_records_get_the_campaign_report(
     assert models["config"]["nx"] == 0 and models["config"]["degrees"] == [3]
     levels = models["levels"]
     assert [levels[k]["role"] for k in ("1", "2", "3")] == ["estimation", "held out", "estimation"]
-    for k in ("1", "3"):
-        assert levels[k]["bla"]["method"] == "robust" and levels[k]["clusters"]["k"] >= 1
-        assert levels[k]["bla_ss"]["order_scanned"] is True
+    for name in ("1", "3"):
+        assert levels[name]["bla"]["method"] == "robust" and levels[name]["clusters"]["k"] >= 1
+        assert levels[name]["bla_ss"]["order_scanned"] is True
     assert "bla_ss" not in levels["2"]  # held out: no model is fitted to it
     assert models["models"]["pnlss_all_levels"] is not None
     assert models["pnlss"]["held_out"] == "realization 1 of each level"

@@ -41,7 +41,7 @@ from rig_runtime.interface import (
 from .campaigns import default_plan, short_plan
 from .pacing import StreamPacer
 from .plan import ExperimentPlan
-from .plan_format import plan_from_json, plan_to_json, segment_event
+from .plan_format import plan_from_json, plan_message, segment_event
 
 _LIMITS = ActuatorLimits()  # the defaults of the limit parameters
 
@@ -207,9 +207,8 @@ class Generator:
             return False
         self.t0_ns = time.time_ns()
         self.pacer.start(time.monotonic())
-        payload = json.loads(plan_to_json(self.plan))
-        payload["t0_ns"] = self.t0_ns
-        self.plan_pub.publish(self.node.new_message(EXPERIMENT_PLAN.type, data=json.dumps(payload)))
+        message = plan_message(self.plan, self.t0_ns)
+        self.plan_pub.publish(self.node.new_message(EXPERIMENT_PLAN.type, data=message))
         self.node.logger.info(
             "start barrier passed after %.2f s (%d nodes ready and matched); t0 = %d ns; streaming",
             now - self.created,

@@ -35,8 +35,10 @@ __all__ = [
     "PLAN_VERSION",
     "plan_from_dict",
     "plan_from_json",
+    "plan_message",
     "plan_to_dict",
     "plan_to_json",
+    "read_plan_message",
     "segment_event",
     "segment_from_dict",
     "segment_to_dict",
@@ -170,6 +172,25 @@ def plan_from_json(text: str) -> ExperimentPlan:
     if not isinstance(data, dict):
         raise PlanError("experiment plan JSON must be an object")
     return plan_from_dict(data)
+
+
+def plan_message(plan: ExperimentPlan, t0_ns: int) -> str:
+    """The `/experiment/plan` message: the plan's JSON and ``t0_ns``, the stamp of sample 0
+    (docs/design.md §5)."""
+    payload = plan_to_dict(plan)
+    payload["t0_ns"] = int(t0_ns)
+    return json.dumps(payload, allow_nan=False)
+
+
+def read_plan_message(text: str) -> tuple[ExperimentPlan, int]:
+    """The plan and t0_ns of an `/experiment/plan` message; PlanError when it is not one."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise PlanError(f"/experiment/plan is not valid JSON: {error}") from error
+    if not isinstance(data, dict) or not isinstance(data.get("t0_ns"), int):
+        raise PlanError("/experiment/plan holds no plan with an integer t0_ns")
+    return plan_from_dict(data), int(data["t0_ns"])
 
 
 def segment_to_dict(segment: Segment) -> dict[str, Any]:

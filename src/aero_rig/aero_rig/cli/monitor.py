@@ -3,6 +3,8 @@
 import json
 from typing import Any
 
+from multisine_gen.plan import PlanError
+from multisine_gen.plan_format import read_plan_message
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, IDENTIFICATION_STATUS
 
 
@@ -32,9 +34,12 @@ class CampaignMonitor:
         )
 
     def _plan(self, msg: Any) -> None:
-        plan = json.loads(msg.data)
-        self.total = int(plan["total_samples"])
-        self.fs = float(plan["fs"])
+        try:
+            plan, _ = read_plan_message(msg.data)
+        except PlanError:
+            return  # the identifier refuses it, naming why, and the graph stops
+        self.total = plan.total_samples
+        self.fs = plan.fs
 
     def _segment(self, msg: Any) -> None:
         event = json.loads(msg.data)
