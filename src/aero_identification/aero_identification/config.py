@@ -13,7 +13,6 @@ node can hold the config without loading the numerical stack.
 
 import argparse
 import dataclasses
-import math
 import typing
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -24,7 +23,6 @@ from rig_runtime.params import Parameter, ParameterError
 # Value kinds of the fields, from their annotations: scalars, tuples of scalars (list
 # parameters), and tuples of integer tuples (lists of strings "2,3", e.g. degree sets).
 _SCALARS: tuple[type, ...] = (bool, int, float, str)
-_TYPE_NAMES = {bool: "bool", int: "int", float: "float", str: "string"}
 
 
 def hyper(
@@ -177,66 +175,40 @@ class _Spec:
     element: type  # the scalar type (of the elements)
 
     def coerce(self, value: Any) -> Any:
-        """``value`` as the field's type (lists as tuples, "2,3" as (2, 3)), range-checked;
-        ParameterError naming the field when it is not one."""
+        """``value`` as the field's type (lists as tuples, "2,3" as (2, 3)), checked by the
+        runtime's own parameter rule (rig_runtime.params.Parameter.validate); ParameterError
+        naming the field when it is not one."""
         if self.kind == "scalar":
-            return self._scalar(value, value)
+            return self._checker().validate(value, SOURCE)
         if not isinstance(value, list | tuple) or not value:
-            raise self._error(value, "a non-empty list")
+            raise self._error(value, "expected a non-empty list")
         if self.kind == "list":
-            return tuple(self._scalar(v, value) for v in value)
+            return tuple(self._checker().validate(list(value), SOURCE))
         sets = []
         for item in value:
             if isinstance(item, str):
                 try:
                     item = parse_degrees(item)
                 except ValueError as exc:
-                    raise self._error(value, str(exc), expected=False) from None
+                    raise self._error(value, str(exc)) from None
             if not isinstance(item, list | tuple) or not item:
-                raise self._error(value, "a list of integer sets such as '2,3' or [2, 3]")
-            sets.append(tuple(self._scalar(v, value) for v in item))
+                raise self._error(value, "expected a list of integer sets such as '2,3' or [2, 3]")
+            sets.append(tuple(self._checker().validate(list(item), SOURCE)))
         return tuple(sets)
 
-    def _scalar(self, value: Any, whole: Any) -> Any:
-        kind = self.element
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if (kind is not bool and isinstance(value, bool)) or not isinstance(value, kind):
-            raise self._error(whole, f"type {self.type_name()}")
-        if (
-            isinstance(value, int | float)
-            and not isinstance(value, bool)
-            and (
-                math.isnan(value)
-                or (self.min is not None and value < self.min)
-                or (self.max is not None and value > self.max)
-            )
-        ):
-            raise self._error(whole, self.describe_range())
-        if self.choices and value not in self.choices:
-            raise self._error(whole, f"one of {list(self.choices)}")
-        return value
+    def _checker(self) -> Parameter:
+        """The range check of a value (scalar) or of one list / degree set."""
+        return Parameter(
+            self.name,
+            self.default if self.kind == "scalar" else [self.element()],
+            self.description,
+            min=self.min,
+            max=self.max,
+            choices=self.choices,
+            element_type=None if self.kind == "scalar" else self.element,
+        )
 
-    def type_name(self) -> str:
-        name = _TYPE_NAMES[self.element]
-        if self.kind == "list":
-            return f"list of {name}"
-        if self.kind == "sets":
-            return "list of integer sets ('2,3')"
-        return name
-
-    def describe_range(self) -> str:
-        parts = [f"type {self.type_name()}"]
-        if self.min is not None or self.max is not None:
-            lo = "-inf" if self.min is None else f"{self.min:g}"
-            hi = "inf" if self.max is None else f"{self.max:g}"
-            parts.append(f"range [{lo}, {hi}]")
-        if self.choices:
-            parts.append(f"one of {list(self.choices)}")
-        return ", ".join(parts)
-
-    def _error(self, value: Any, what: str, expected: bool = True) -> ParameterError:
-        reason = f"expected {what}" if expected else what
+    def _error(self, value: Any, reason: str) -> ParameterError:
         return ParameterError(
             f"identification parameter {self.name!r} = {value!r} is invalid: {reason} — "
             f"{self.description}"
@@ -293,6 +265,7 @@ def _kind(name: str, annotation: Any) -> tuple[str, type]:
 
 
 _SPECS = _read_specs()
+SOURCE = "the identification config"  # where a value came from, in error messages
 
 
 def _jsonable(value: Any) -> Any:
@@ -335,11 +308,11 @@ def _cli_type(spec: _Spec) -> Any:
         try:
             if spec.kind == "sets":
                 value: Any = parse_degrees(text)
-                for v in value:
-                    spec._scalar(v, text)
-                return value
+                return tuple(spec._checker().validate(list(value), "the command line"))
             value = spec.element(text)
-            return spec._scalar(value, text)
+            if spec.kind == "list":
+                return spec._checker().validate([value], "the command line")[0]
+            return spec._checker().validate(value, "the command line")
         except ValueError as exc:  # ParameterError too
             raise argparse.ArgumentTypeError(str(exc)) from None
 
