@@ -34,6 +34,7 @@ from rosbags.highlevel import AnyReader
 
 from aero_rig.cli.common import config_path
 from aero_rig.cli.monitor import CampaignMonitor
+from rig_runtime import ros_environment
 from rig_runtime.graph import load_graph
 from rig_runtime.interface import PITCH_COMMAND, WING_COEFFICIENTS
 from rig_runtime.launcher import Launcher
@@ -75,7 +76,7 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
         "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
     }
     launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs")
-    monitor = CampaignMonitor()
+    monitor = CampaignMonitor(ros_environment.backend_name())
     peaks: dict[str, float] = {}
     cpu: dict[str, float] = {}
     trace: dict[str, list[float]] = {}

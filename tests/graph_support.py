@@ -100,3 +100,16 @@ class PeerReaders:
         return {e.topic for e in readers} >= set(topics) and all(
             e.matched_count > 0 for e in readers
         )
+
+    def writers_matched(self, topics: list[str]) -> bool:
+        """Every topic has a writer in some node's report, and every such writer has matched a
+        reader (the test's own, once the node under test has seen it)."""
+        writers = [
+            e
+            for r in self.reports.values()
+            for e in r.endpoints
+            if e.kind == "writer" and e.topic in topics
+        ]
+        return {e.topic for e in writers} >= set(topics) and all(
+            e.matched_count > 0 for e in writers
+        )

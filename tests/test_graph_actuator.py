@@ -4,7 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from graph_support import Observer
+from graph_support import Observer, PeerReaders
 
 from multisine_gen.campaigns import short_plan
 from pitch_actuator.dynamics import ActuatorModel
@@ -27,6 +27,11 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
     try:
         with Processes(env, log_dir=tmp_path) as procs:
             procs.start_entry("pitch_actuator", "sim_actuator", "--ros-args", "-p", "seed:=5")
+            # The actuator's /pitch/state writer must know this observer's reader before the
+            # first command: what a writer sends before its side has matched is not delivered.
+            peers = PeerReaders(observer.node)
+            matched = observer.spin_until(lambda: peers.writers_matched([PITCH_STATE.name]), 60)
+            assert matched, procs.log("sim_actuator")
             gen = procs.start_entry(
                 "multisine_gen",
                 "generator",

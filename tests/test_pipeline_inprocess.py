@@ -101,7 +101,7 @@ def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) ->
     interim = identify(asm, config)
     assert not any("not used for validation" in w for w in interim.warnings), interim.warnings
     final = identify(asm, config, final=True, models_from=interim)
-    assert any(f"sine {sine['frequency_hz']:g} Hz" in w for w in final.warnings), final.warnings
+    assert any(f"sine {sine.frequency_hz:g} Hz" in w for w in final.warnings), final.warnings
     # A gap in a record whose last sample is in is a fault at once.
     end = sine.start_k + sine.length
     gap = np.ones(end, dtype=bool)

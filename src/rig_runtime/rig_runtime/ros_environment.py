@@ -26,6 +26,12 @@ DOMAIN_ENV = "ROS_DOMAIN_ID"
 NETWORK_ALIAS_ENV = "RIG_DDS_NETWORK"
 RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
 MAX_DOMAIN_ID = 232
+# How long a participant that stopped announcing itself (a paused, hung or dead process) stays
+# matched, per backend: Cyclone DDS's default Discovery/LeaseDuration (10 s; cyclone_config
+# does not change it) and Fast DDS's default participant leaseDuration (20 s; rmw_fastrtps and
+# fastdds_profiles.xml leave it). After that a reliable writer drops the reader and what it
+# did not deliver; the campaign's liveness bound is derived from it (aero_rig/cli/liveness.py).
+PARTICIPANT_LEASE_S = {"dds": 10.0, "rclpy": 20.0}
 INSTALL_RCLPY = 'pip install "ros-jazzy-rclpy[fastrtps]" ros-jazzy-common-interfaces'
 
 

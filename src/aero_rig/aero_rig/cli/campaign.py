@@ -52,6 +52,7 @@ class Outcome:
     wall: float  # wall seconds from start to stop
     total: int  # plan samples (0: the plan was never seen)
     fs: float  # the plan's sample rate [Hz]
+    stalled: str | None = None  # the identifier stalled after the plan's end (liveness.py)
 
 
 def add_parser(subparsers: Any) -> None:
@@ -103,7 +104,16 @@ def main(args: argparse.Namespace) -> int:
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    outcome = launch_and_monitor(launcher, timeout=args.timeout, quiet=args.quiet)
+    outcome = launch_and_monitor(launcher, backend, timeout=args.timeout, quiet=args.quiet)
+    recovered = None
+    if outcome.stalled and not launcher.failure:
+        recovered = recover_from_bag(run_dir, launcher, outcome.stalled)
+        if recovered is None:
+            launcher.failure = outcome.stalled
+    elif not launcher.failure and (missed := samples_missed(run_dir)):
+        # The identifier finished without samples the recorder may hold (it was paused past
+        # the DDS lease, which dropped it as a reader): the bag decides.
+        recovered = recover_from_bag(run_dir, launcher, missed)
     if launcher.failure:
         print(f"aero-rig: campaign failed: {launcher.failure}", file=sys.stderr)
         print(
@@ -111,7 +121,9 @@ def main(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_FAILED
-    return summarise(run_dir, backend, outcome, allow_excluded=args.allow_excluded)
+    return summarise(
+        run_dir, backend, outcome, allow_excluded=args.allow_excluded, recovered=recovered
+    )
 
 
 def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dict[str, Any]]:
@@ -142,15 +154,18 @@ def use_backend(backend: str) -> dict[str, str]:
     return env
 
 
-def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Outcome:
-    """Start the graph, follow it until it ends, fails, times out or is stopped; stop it.
+def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quiet: bool) -> Outcome:
+    """Start the graph, follow it until it ends, fails, stalls, times out or is stopped; stop
+    it.
 
     SIGTERM and SIGHUP stop the graph as Ctrl-C does; ``launcher.failure`` says why a run did
-    not end by itself (a node's exit, the timeout, the signal).
+    not end by itself (a node's exit, the timeout, the signal); ``Outcome.stalled`` that the
+    identifier made no progress within the liveness bound after the plan's end (liveness.py).
     """
     from tqdm import tqdm
 
-    monitor = CampaignMonitor()
+    monitor = CampaignMonitor(backend)
+    stalled: str | None = None
     started = time.monotonic()
     stopped_by: list[str] = []
 
@@ -173,6 +188,13 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
             progress.set_postfix_str(monitor.state or "starting")
             progress.refresh()
             reason = launcher.poll()
+            now = time.monotonic()
+            note = monitor.liveness.silent_mid_run(now)
+            if note:
+                progress.write(f"aero-rig: warning: {note}", file=sys.stderr)
+            if reason is None:
+                stalled = monitor.liveness.check(now)
+                reason = stalled
             if timeout and time.monotonic() - started > timeout:
                 reason = f"timeout after {timeout:g} s"
                 launcher.failure = reason
@@ -190,10 +212,75 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
         codes = launcher.stop()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    return Outcome(reason, codes, time.monotonic() - started, monitor.total, monitor.fs)
+    return Outcome(reason, codes, time.monotonic() - started, monitor.total, monitor.fs, stalled)
 
 
-def summarise(run_dir: Path, backend: str, outcome: Outcome, *, allow_excluded: bool) -> int:
+def recover_from_bag(run_dir: Path, launcher: Launcher, stalled: str) -> dict[str, Any] | None:
+    """The final identification from the bag, after the identifier stalled: the same pipeline
+    on the same assembler (aero_rig.offline) with the identifier's own parameters (its
+    parameter files and overrides), its report written into the run directory. None (and
+    the stall is the campaign's failure) when the bag cannot be read."""
+    from ..offline import BagError, fit_bag
+
+    bag = run_dir / "bag"
+    print(f"aero-rig: {stalled}", file=sys.stderr)
+    print(f"aero-rig: recovering the final identification from {bag}", file=sys.stderr)
+    try:
+        config = identifier_config(launcher)
+        result, data = fit_bag(bag, run_dir, config)
+    except (BagError, ValueError, OSError) as exc:
+        print(f"aero-rig: recovery from the bag failed: {exc}", file=sys.stderr)
+        return None
+    for warning in data.warnings:
+        print(f"aero-rig: warning: {warning}", file=sys.stderr)
+    return {
+        "reason": stalled,
+        "from": str(bag),
+        "samples_read": data.messages,
+        "clean": result.clean,
+    }
+
+
+def samples_missed(run_dir: Path) -> str | None:
+    """What the identifier's final report lacks that a bag may hold: plan samples missing on a
+    channel (None when none are, or there is no report)."""
+    models = run_dir / "models.json"
+    if not models.exists():
+        return None
+    samples = json.loads(models.read_text()).get("data_quality", {}).get("samples", {})
+    missing = {name: int(c.get("missing", 0)) for name, c in samples.items()}
+    if not any(missing.values()):
+        return None
+    counts = ", ".join(f"{n} {name}" for name, n in missing.items() if n)
+    return f"the identifier's final identification missed plan samples ({counts})"
+
+
+def identifier_config(launcher: Launcher) -> Any:
+    """The identifier's hyperparameters as the graph started it: its declared defaults, its
+    parameter files, the graph's and the campaign's overrides (rig_runtime.params)."""
+    from aero_identification.config import config_from_parameters
+    from aero_identification.identifier_node import PARAMETERS
+    from rig_runtime.params import assign, resolve_parameters
+
+    spec = launcher.graph.node("identifier")
+    params = resolve_parameters(PARAMETERS, spec.fq_name, spec.parameters)
+    for source, values in (
+        ("the graph", spec.parameter_overrides),
+        ("the campaign", launcher.overrides.get("identifier", {})),
+    ):
+        for name, value in values.items():
+            assign(params, name, value, source)
+    return config_from_parameters(params.as_dict())
+
+
+def summarise(
+    run_dir: Path,
+    backend: str,
+    outcome: Outcome,
+    *,
+    allow_excluded: bool,
+    recovered: dict[str, Any] | None = None,
+) -> int:
     """Judge a finished run, write campaign.json, print the results; the exit code."""
     bad = {n: c for n, c in outcome.codes.items() if c not in (0, -2, 130)}
     if not (run_dir / "table1_all_levels.md").exists():
@@ -214,9 +301,15 @@ def summarise(run_dir: Path, backend: str, outcome: Outcome, *, allow_excluded: 
         "exit_codes": outcome.codes,
         "clean": not problems,
         "problems": problems,
+        "recovered_from_bag": recovered,
     }
     (run_dir / "campaign.json").write_text(json.dumps(summary, indent=1))
     print_results(run_dir, summary, bad)
+    if recovered is not None:
+        print(
+            f"final identification recovered from the bag ({recovered['samples_read']} samples "
+            f"read from {recovered['from']}) after: {recovered['reason']}"
+        )
     if problems:
         print_problems(run_dir, problems)
         if not allow_excluded:

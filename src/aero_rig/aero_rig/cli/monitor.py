@@ -1,19 +1,23 @@
 """The campaign's in-process observer: the plan, the progress and the identifier's state."""
 
 import json
+import time
 from typing import Any
 
 from multisine_gen.plan import PlanError
 from multisine_gen.plan_format import read_plan_message
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, IDENTIFICATION_STATUS
 
+from .liveness import Liveness, stall_bound_s
+
 
 class CampaignMonitor:
     """In-process observer: progress from segment events, end from the identifier's status."""
 
-    def __init__(self) -> None:
+    def __init__(self, backend: str) -> None:
         from rig_runtime.node import Node
 
+        self.liveness = Liveness(stall_bound_s(backend))
         self.node = Node("aero_rig_campaign", argv=[])  # the graph's backend (the env's)
         self.total = 0
         self.fs = 0.0  # the plan's sample rate [Hz]
@@ -40,19 +44,26 @@ class CampaignMonitor:
             return  # the identifier refuses it, naming why, and the graph stops
         self.total = plan.total_samples
         self.fs = plan.fs
+        self.liveness.total = plan.total_samples
 
     def _segment(self, msg: Any) -> None:
         event = json.loads(msg.data)
         if event.get("event") == "end":
             self.k = int(event["start_k"]) + int(event["length"])
-        elif event.get("event") == "plan_end":
+        elif event.get("event") in ("plan_end", "plan_aborted"):
             self.k = self.total
+            self.liveness.plan_ended(time.monotonic())
 
     def _status(self, msg: Any) -> None:
-        for status in msg.status:
-            for kv in status.values:
-                if kv.key == "state":
-                    self.state = kv.value
+        values = {kv.key: kv.value for status in msg.status for kv in status.values}
+        if "state" not in values:
+            return
+        self.state = values["state"]
+        try:
+            samples = (int(values.get("pitch_samples", 0)), int(values.get("cl_samples", 0)))
+        except ValueError:
+            samples = (0, 0)
+        self.liveness.status(time.monotonic(), self.state, samples)
 
     def spin(self, seconds: float) -> None:
         self.node.spin_until(lambda: False, seconds)
