@@ -187,6 +187,34 @@ def test_every_plan_sample_is_accounted_for(campaign) -> None:
     assert counts["C_l"]["outside_plan"] == 1
 
 
+def test_identifier_names_a_hole_in_the_plan_index_at_once(campaign, monkeypatch) -> None:
+    """Samples a writer dropped (the identifier paused past the DDS lease) show as a gap in the
+    plan index as soon as the next sample arrives: logged, and in the next status."""
+    from aero_identification.identifier_node import PARAMETERS, Identifier
+    from rig_runtime import Node
+    from rig_runtime.testing import graph_env, join_graph
+
+    join_graph(graph_env(), monkeypatch.setenv)
+    plan, stamps, u, _ = campaign
+    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "use_worker:=false"], backend="dds")
+    ident = Identifier(node)
+    statuses: list[dict[str, str]] = []
+    ident.status_pub.publish = lambda msg: statuses.append(  # type: ignore[method-assign]
+        {kv.key: kv.value for st in msg.status for kv in st.values}
+    )
+    try:
+        ident.assembler = CampaignAssembler(plan, T0)
+        for k in [*range(10), *range(30, 40)]:
+            ident._add("u", int(stamps[k]), float(u[k]))
+        assert ident.gaps == {"u": [(10, 29)], "y": []}
+        ident.publish_status()
+        assert statuses[-1]["pitch gaps"].startswith("1 gap(s), 20 plan samples never arrived")
+        assert "C_l gaps" not in statuses[-1]
+    finally:
+        ident.close()
+        node.close()
+
+
 def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -> None:
     """The refit worker killed mid-job: the error is reported, the previous models are kept,
     a new worker is started, and the next refit (a full one) succeeds."""

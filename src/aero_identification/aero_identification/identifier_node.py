@@ -52,6 +52,8 @@ from .quality import data_quality_lines
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
 
+MAX_LOGGED_GAPS = 10  # gaps logged one by one per channel; the status counts them all
+
 PARAMETERS = [
     Parameter("output_dir", "", "run directory for models.json and the report ('' = none)"),
     # The identification hyperparameters, declared with their ranges in config.py.
@@ -92,6 +94,11 @@ class Identifier:
         self.anomalies_received = 0
         self.anomalies_at_submit = 0  # anomalies the running refit's data snapshot includes
         self.last_k = {"u": -1, "y": -1}
+        # Holes in the plan sample index per channel, as they open (first k, last k): samples a
+        # writer dropped (this reader paused past the DDS lease, a writer that vanished and came
+        # back) or lost. Logged at once and in the next status (1 s); never patched: the final
+        # identification excludes what they touch, and the campaign recovers them from the bag.
+        self.gaps: dict[str, list[tuple[int, int]]] = {"u": [], "y": []}
         # (needed k, final, reason, new multisine data: the models must be refitted)
         self.pending: list[tuple[int, bool, str, bool]] = []
         self.models_stale = True
@@ -219,7 +226,23 @@ class Identifier:
             return
         self.assembler.add(channel, stamp, value)
         self.samples[channel] += 1
-        self.last_k[channel] = max(self.last_k[channel], self.assembler.index_of(stamp))
+        k = self.assembler.index_of(stamp)
+        if k > self.last_k[channel] + 1 and 0 <= k < self.assembler.total:
+            self._gap(channel, self.last_k[channel] + 1, k - 1)
+        self.last_k[channel] = max(self.last_k[channel], k)
+
+    def _gap(self, channel: str, first: int, last: int) -> None:
+        gaps = self.gaps[channel]
+        gaps.append((first, last))
+        topic = PITCH_STATE.name if channel == "u" else WING_COEFFICIENTS.name
+        if len(gaps) <= MAX_LOGGED_GAPS:
+            self.node.logger.warning(
+                "%s: plan samples %d..%d (%d) never arrived before sample %d: dropped by the "
+                "writer (this node paused past the DDS lease?) or lost; the recorder's bag may "
+                "hold them%s",
+                topic, first, last, last - first + 1, last + 1,
+                "" if len(gaps) < MAX_LOGGED_GAPS else " (further gaps: in the status only)",
+            )  # fmt: skip
 
     def on_state(self, msg: Any) -> None:
         pitch = joint_position(msg, PITCH_JOINT)
@@ -380,6 +403,14 @@ class Identifier:
             "pitch_samples": str(self.samples["u"]),
             "cl_samples": str(self.samples["y"]),
         }
+        for channel, name in (("u", "pitch"), ("y", "C_l")):
+            gaps = self.gaps[channel]
+            if gaps:
+                lost = sum(b - a + 1 for a, b in gaps)
+                first, last = gaps[-1]
+                values[f"{name} gaps"] = (
+                    f"{len(gaps)} gap(s), {lost} plan samples never arrived (last {first}..{last})"
+                )
         if self.assembler is not None:
             for (level, real), block in sorted(self.assembler.blocks.items()):
                 valid = int(block.period_valid().sum())
@@ -411,7 +442,8 @@ class Identifier:
             values["anomalies"] = "; ".join(quality["anomalies"])
         if quality.get("excluded_sines"):
             values["excluded sine records"] = "; ".join(quality["excluded_sines"])
-        level = 2 if self.errors else (1 if excluded or warnings or problems else 0)
+        gapped = any(self.gaps.values())
+        level = 2 if self.errors else (1 if excluded or warnings or problems or gapped else 0)
         message = values["state"]
         msg = diagnostic_array(
             self.node,
