@@ -3,8 +3,9 @@
 Reads ``/experiment/plan``, ``/pitch/state`` and ``/wing/coefficients`` from a bag (MCAP or
 sqlite3, recorded by this graph's recorder or by ``ros2 bag record``), rebuilds the plan's
 periods from the stamps exactly as the node does (aero_identification.campaign) and runs the
-final identification (aero_identification.pipeline). A bag whose tail is damaged is read up
-to the damage, with a warning; a bag without the needed topics is refused, naming them. The
+final identification (aero_identification.pipeline). A damaged bag is read through a salvaged
+copy: every intact chunk, with a warning naming each gap (time span, messages lost per topic)
+and a file's damaged tail; a bag without the needed topics is refused, naming them. The
 anomalies recorded on ``/experiment/anomaly`` exclude what they touch, as in the node.
 """
 
@@ -54,28 +55,56 @@ class BagData:
 
 
 def read_campaign_bag(bag: str | Path) -> BagData:
-    """Plan and samples of a campaign bag, cut into periods."""
-    from rosbags.highlevel import AnyReader
+    """Plan and samples of a campaign bag, cut into periods.
 
+    A bag that rosbags cannot open (a file without its footer) or that fails while it is read
+    (a damaged chunk) is read again through a salvaged copy (:func:`_recovered_view`): every
+    intact chunk, with a warning per gap (its time span and the messages lost per topic). The
+    samples of a lost chunk are then missing from their periods, and the data-quality account
+    names them.
+    """
     path = Path(bag)
     if not path.exists():
         raise BagError(f"bag {path} does not exist")
-    warnings: list[str] = []
-    view: Path | None = None
+    data, failure = _read_bag(path, path)
+    if failure is None:
+        assert data is not None
+        return data
+    view, warnings = _recovered_view(path, failure)
+    if view is None:  # nothing to salvage (not MCAP, or no damaged chunk found)
+        if data is None:
+            raise BagError(f"cannot open bag {path}: {failure}") from failure
+        data.warnings.append(_damaged_after(path, data.messages, failure))
+        return data
     try:
-        reader = AnyReader([path])
+        salvaged, failure2 = _read_bag(view, path)
+    except BagError as exc:  # e.g. the plan message was in a lost chunk
+        raise BagError(f"{exc}; {' '.join(warnings)}") from exc
+    finally:
+        shutil.rmtree(view.parent, ignore_errors=True)
+    if salvaged is None:
+        raise BagError(
+            f"cannot open bag {path}: {failure}; recovered copy: {failure2}"
+        ) from failure2
+    salvaged.warnings[:0] = warnings
+    if failure2 is not None:
+        salvaged.warnings.append(_damaged_after(path, salvaged.messages, failure2))
+    return salvaged
+
+
+def _read_bag(source: Path, path: Path) -> tuple[BagData | None, Exception | None]:
+    """Read the bag at ``source`` (``path`` names it in messages): the data and the error that
+    stopped the read (None: read to the end). No data when the read stopped before the plan
+    and the samples (cannot open, plan unreadable); the samples read up to the error when it
+    stopped among them. A bag that cannot be fitted whatever its state raises BagError."""
+    from rosbags.highlevel import AnyReader
+
+    warnings: list[str] = []
+    try:
+        reader = AnyReader([source])
         reader.open()
     except Exception as exc:
-        view, warning = _recovered_view(path, exc)
-        if view is None:
-            raise BagError(f"cannot open bag {path}: {exc}") from exc
-        warnings.append(warning)
-        try:
-            reader = AnyReader([view])
-            reader.open()
-        except Exception as exc2:
-            shutil.rmtree(view.parent, ignore_errors=True)
-            raise BagError(f"cannot open bag {path}: {exc}; recovered copy: {exc2}") from exc2
+        return None, exc
     try:
         topics = {c.topic for c in reader.connections}
         missing = [t for t in REQUIRED_TOPICS if t not in topics]
@@ -83,11 +112,23 @@ def read_campaign_bag(bag: str | Path) -> BagData:
             raise BagError(
                 f"bag {path} lacks topic(s) {missing} needed for a fit; it has {sorted(topics)}"
             )
-        plan_conns = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
-        message: str | None = None
-        for conn, _, raw in reader.messages(connections=plan_conns):
-            plan_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
-            message = plan_msg.data
+        try:
+            plan_conns = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
+            message: str | None = None
+            for conn, _, raw in reader.messages(connections=plan_conns):
+                plan_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
+                message = plan_msg.data
+            recorded_config = None
+            model_conns = [c for c in reader.connections if c.topic == IDENTIFICATION_MODEL.name]
+            # (no connection at all would mean every message to rosbags)
+            for conn, _, raw in reader.messages(connections=model_conns) if model_conns else ():
+                model_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
+                try:
+                    recorded_config = json.loads(model_msg.data).get("config") or recorded_config
+                except (ValueError, AttributeError):
+                    warnings.append(f"bag {path}: an /identification/model message is not JSON")
+        except Exception as exc:  # a damaged chunk
+            return None, exc
         if message is None:
             raise BagError(f"bag {path}: /experiment/plan holds no message")
         try:
@@ -95,20 +136,12 @@ def read_campaign_bag(bag: str | Path) -> BagData:
         except PlanError as exc:
             raise BagError(f"bag {path}: {exc}") from exc
         assembler = CampaignAssembler(plan, t0_ns)
-        recorded_config = None
-        model_conns = [c for c in reader.connections if c.topic == IDENTIFICATION_MODEL.name]
-        for conn, _, raw in reader.messages(connections=model_conns):
-            model_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
-            try:
-                recorded_config = json.loads(model_msg.data).get("config") or recorded_config
-            except (ValueError, AttributeError):
-                warnings.append(f"bag {path}: an /identification/model message is not JSON")
         wanted = [
             c
             for c in reader.connections
             if c.topic in (*REQUIRED_TOPICS[1:], EXPERIMENT_ANOMALY.name)
         ]
-        count = 0
+        data = BagData(plan, assembler, 0, warnings, recorded_config)
         try:
             for conn, _, raw in reader.messages(connections=wanted):
                 msg: Any = reader.deserialize(raw, conn.msgtype)  # a message, typed at runtime
@@ -122,45 +155,66 @@ def read_campaign_bag(bag: str | Path) -> BagData:
                     assembler.add("u", stamp, math.nan if pitch is None else math.degrees(pitch))
                 else:
                     assembler.add("y", stamp, float(msg.vector.x))
-                count += 1
-        except Exception as exc:  # a damaged tail: keep what was read
-            warnings.append(
-                f"bag {path} is damaged after {count} messages ({type(exc).__name__}: {exc}); "
-                "fitting the data up to the damage"
-            )
+                data.messages += 1
+        except Exception as exc:  # a damaged chunk: what was read so far, and why it stopped
+            return data, exc
     finally:
         reader.close()
-        if view is not None:
-            shutil.rmtree(view.parent, ignore_errors=True)
-    return BagData(plan, assembler, count, warnings, recorded_config)
+    return data, None
 
 
-def _recovered_view(path: Path, exc: Exception) -> tuple[Path | None, str]:
-    """A readable copy of an MCAP bag whose file(s) lost their footer, and the warning.
+def _damaged_after(path: Path, count: int, exc: Exception) -> str:
+    return (
+        f"bag {path} is damaged after {count} messages ({type(exc).__name__}: {exc}); "
+        "fitting the data up to the damage"
+    )
+
+
+def _recovered_view(path: Path, exc: Exception) -> tuple[Path | None, list[str]]:
+    """A readable copy of a damaged MCAP bag, and the warnings that say what it lacks.
 
     A recording cut short (kill -9 or power loss of the recorder, a copy cut short) leaves an
-    MCAP file without its footer and summary, which rosbags refuses whole. The whole files are
-    linked and the damaged ones rewritten up to their last complete chunk
-    (rig_runtime.bag_recover, what ``aero-rig bag recover`` does in place) into a temporary
-    directory; None if that is not an MCAP bag or nothing in it is readable.
+    MCAP file without its footer and summary, which rosbags refuses whole; a damaged chunk (a
+    bad sector, a stray write) stops rosbags at that chunk. The whole files are linked and the
+    damaged ones rewritten with every intact chunk (rig_runtime.bag_recover, what
+    ``aero-rig bag recover`` does in place) into a temporary directory; None if that is not an
+    MCAP bag, no file is damaged, or nothing in it is readable.
     """
-    from rig_runtime.bag_recover import format_stamp, last_readable_ns, recovered_view
+    from rig_runtime.bag_recover import (
+        describe_gap,
+        describe_unknown_channels,
+        format_stamp,
+        last_readable_ns,
+        recovered_view,
+    )
 
     try:
         view, reports = recovered_view(path)
     except Exception:
-        return None, ""
+        return None, []
     damaged = [r for r in reports if not r.intact]
     if not damaged or not any(r.stats.count for r in reports):
         shutil.rmtree(view.parent, ignore_errors=True)
-        return None, ""
-    files = ", ".join(f"{r.name} ({r.error}, {r.stats.count} messages readable)" for r in damaged)
-    warning = (
-        f"bag {path} has damaged file(s) {files} ({type(exc).__name__}: {exc}); fitting the "
-        f"data up to the damage: last readable time {format_stamp(last_readable_ns(reports))}. "
-        f"`aero-rig bag recover {path}` repairs the bag in place"
-    )
-    return view, warning
+        return None, []
+    cause = f"{type(exc).__name__}: {exc}"
+    warnings = []
+    for r in damaged:
+        warnings += [
+            f"bag {path}: {r.name}: {describe_gap(g)}; fitting every readable chunk" for g in r.gaps
+        ]
+        warnings += [f"bag {path}: {r.name}: {line}" for line in describe_unknown_channels(r)]
+    cut = [r for r in damaged if r.error]
+    if cut:
+        files = ", ".join(f"{r.name} ({r.error}, {r.stats.count} messages readable)" for r in cut)
+        warnings.append(
+            f"bag {path} has damaged file(s) {files} ({cause}); fitting the data up to the "
+            f"damage: last readable time {format_stamp(last_readable_ns(cut))}"
+        )
+    if not warnings:
+        names = ", ".join(r.name for r in damaged)
+        warnings.append(f"bag {path}: {names} read through a rewritten copy ({cause})")
+    warnings[-1] += f". `aero-rig bag recover {path}` repairs the bag in place"
+    return view, warnings
 
 
 def fit_bag(

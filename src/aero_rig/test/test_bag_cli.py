@@ -1,16 +1,22 @@
-"""``aero-rig bag recover``: a bag whose recorder died gets its footer and metadata back."""
+"""``aero-rig bag recover``: a bag whose recorder died gets its footer and metadata back; a
+damaged chunk costs only its own messages, in the recovery and in ``aero-rig fit``'s reader."""
 
+import tempfile
 from pathlib import Path
+from typing import Any
 
 import pytest
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from aero_rig.cli import main
+from aero_rig.offline import read_campaign_bag
+from multisine_gen.campaigns import short_plan
+from multisine_gen.plan_format import plan_message
 from rig_runtime.bag import BagWriter
 from rig_runtime.bag_recover import is_intact
-from rig_runtime.interface import PITCH_STATE
-from rig_runtime.messages import new_message, serialize
+from rig_runtime.interface import EXPERIMENT_PLAN, PITCH_JOINT, PITCH_STATE, WING_COEFFICIENTS
+from rig_runtime.messages import new_message, serialize, set_stamp
 
 T0 = 1_700_000_000 * 10**9
 
@@ -46,3 +52,87 @@ def test_bag_recover_of_a_missing_bag_fails_clearly(
 ) -> None:
     assert main(["bag", "recover", str(tmp_path / "nope")]) == 2
     assert "not a directory" in capsys.readouterr().err
+
+
+def _campaign_bag(bag: Path, samples: int, per_chunk: int) -> tuple[int, Any]:
+    """The short plan's message and its first ``samples`` plan samples of pitch and C_l, one
+    chunk per ``per_chunk`` samples (the recorder's flush); the plan's t0 and the chunk index."""
+    plan = short_plan()
+    t0 = T0
+    writer = BagWriter(bag)
+    plan_id = writer.add_connection(EXPERIMENT_PLAN.name, EXPERIMENT_PLAN.type)
+    pitch = writer.add_connection(PITCH_STATE.name, PITCH_STATE.type)
+    wing = writer.add_connection(WING_COEFFICIENTS.name, WING_COEFFICIENTS.type)
+    plan_msg = new_message(EXPERIMENT_PLAN.type, data=plan_message(plan, t0))
+    writer.write(plan_id, t0 - 10**9, serialize(plan_msg))
+    for k in range(samples):
+        t = t0 + round(k * 1e9 / plan.fs)
+        state = new_message(PITCH_STATE.type, name=[PITCH_JOINT], position=[k * 1e-4])
+        coeff = new_message(WING_COEFFICIENTS.type)
+        set_stamp(state.header.stamp, t)
+        set_stamp(coeff.header.stamp, t)
+        coeff.vector.x = k * 1e-3
+        writer.write(pitch, t, serialize(state))
+        writer.write(wing, t, serialize(coeff))
+        if k % per_chunk == per_chunk - 1:
+            writer.flush()
+    writer.close()
+    with (bag / "bag_0.mcap").open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    return t0, sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+
+
+def _damage_chunk(file: Path, chunk: Any) -> None:
+    data = bytearray(file.read_bytes())
+    mid = chunk.chunk_start_offset + chunk.chunk_length // 2
+    data[mid : mid + 64] = bytes(b ^ 0xFF for b in data[mid : mid + 64])
+    file.write_bytes(bytes(data))
+
+
+def test_bag_recover_keeps_every_intact_chunk_and_prints_each_gap(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = tmp_path / "bag"
+    _, chunks = _campaign_bag(bag, 2000, 400)
+    assert len(chunks) == 5
+    _damage_chunk(bag / "bag_0.mcap", chunks[2])
+    assert main(["bag", "recover", str(bag)]) == 0
+    out = capsys.readouterr().out
+    gap = [line for line in out.splitlines() if line.startswith("  gap: ")]
+    assert len(gap) == 1, out
+    assert f"{PITCH_STATE.name} 400, {WING_COEFFICIENTS.name} 400" in gap[0]
+    assert "2023-11-14T22:13:24.000000Z" in gap[0] and "2023-11-14T22:13:25.995000Z" in gap[0]
+    assert "1 unreadable stretch(es) skipped (800 messages lost in them)" in out
+    assert f"{PITCH_STATE.name}: 1600" in out
+    with AnyReader([bag]) as reader:
+        assert reader.message_count == 1 + 2 * 1600
+
+
+def test_fit_reads_around_a_damaged_middle_chunk(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """aero-rig fit's reader: a damaged chunk in the middle of a bag with its summary costs only
+    that chunk's samples (missing from their periods, so the data-quality account names them),
+    with a warning that names the gap."""
+    bag = tmp_path / "bag"
+    t0, chunks = _campaign_bag(bag, 3000, 500)
+    whole = read_campaign_bag(bag)
+    assert whole.warnings == [] and whole.messages == 6000
+    _damage_chunk(bag / "bag_0.mcap", chunks[3])  # samples 1500..1999
+    views = tmp_path / "tmp"
+    views.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(views))  # where the salvaged view goes
+    damaged = read_campaign_bag(bag)
+    assert not list(views.iterdir())  # the view is removed
+    assert damaged.messages == 5000
+    assert len(damaged.warnings) == 1, damaged.warnings
+    assert f"{PITCH_STATE.name} 500, {WING_COEFFICIENTS.name} 500" in damaged.warnings[0]
+    assert "aero-rig bag recover" in damaged.warnings[0]
+    for channel in ("u", "y"):
+        expected = whole.assembler.coverage[channel].copy()
+        assert expected[:3000].all()
+        expected[1500:2000] = 0
+        assert (damaged.assembler.coverage[channel] == expected).all()
+    assert damaged.assembler.t0_ns == t0
+    assert is_intact(bag / "bag_0.mcap")  # the bag is left as it was (its summary is intact)

@@ -1,17 +1,20 @@
-"""Recover a rosbag2 MCAP bag whose writer died (``kill -9``, power loss, a copy cut short).
+"""Recover a rosbag2 MCAP bag whose writer died (``kill -9``, power loss, a copy cut short) or
+whose file was damaged in the middle (a bad sector, a stray write).
 
-Such a file ends without its footer and summary: indexed readers (rosbags, ``mcap``'s seeking
-reader) refuse it whole. Its complete chunks are still there: :func:`read_records` walks the
-file record by record with ``mcap``'s streaming reader (CRCs checked) up to the first record
-that is cut or corrupt. :func:`recover_bag` rewrites each such file through the ``mcap``
-writer (same schemas, channels, messages and chunk compression; written beside it, then
-renamed over it) and rewrites ``metadata.yaml`` from what the files hold, like
-``ros2 bag reindex``. :func:`recovered_view` does the same into a temporary directory and
-leaves the bag untouched (``aero-rig fit`` of a damaged bag).
+A file that ends without its footer and summary is refused whole by indexed readers (rosbags,
+``mcap``'s seeking reader); a damaged chunk stops them at that chunk. Every intact chunk is still
+there: :func:`read_records` reads them all with :mod:`rig_runtime.bag_salvage` (CRCs checked;
+the chunk index drives the read when the summary is there, else a walk of the records that
+skips a damaged chunk and goes on with the next readable one) and names each stretch it could
+not read (:class:`~rig_runtime.bag_salvage.Gap`: time span, messages lost per topic).
+:func:`recover_bag` rewrites each damaged file through the ``mcap`` writer (same schemas,
+channels, messages and chunk compression; written beside it, then renamed over it) and rewrites
+``metadata.yaml`` from what the files hold, like ``ros2 bag reindex``. :func:`recovered_view`
+does the same into a temporary directory and leaves the bag untouched (``aero-rig fit`` of a
+damaged bag).
 """
 
 import os
-import struct
 import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -20,14 +23,13 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from mcap.exceptions import EndOfFile
-from mcap.records import Channel, Chunk, Footer, Message, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Channel, Message, Schema
 
 from .bag import FileStats, TopicInfo, open_file_writer, write_metadata
+from .bag_salvage import Gap, Scan, file_summary, salvage_records
 from .messages import typestore
 
-_COMPRESSION_NAMES = {"zstd": "zstd", "lz4": "lz4", "": "none"}
+_Scan = Scan  # the name the tests and older callers use
 
 
 @dataclass
@@ -35,23 +37,17 @@ class FileReport:
     """What one file of a bag held and what was done with it."""
 
     name: str
-    intact: bool  # had its footer and summary: left as it was
+    intact: bool  # footer, summary and every chunk readable: left as it was
     stats: FileStats
-    error: str = ""  # why the read stopped early ('' if the file was whole)
+    error: str = ""  # why the read stopped early ('' if it read to the end)
     rewritten: bool = False
+    gaps: list[Gap] = field(default_factory=list)  # stretches that could not be read
+    # Messages of channels whose definition was lost with a damaged chunk (no summary).
+    unknown_channels: dict[int, int] = field(default_factory=dict)
 
     @property
     def last_ns(self) -> int | None:
         return self.stats.end_ns if self.stats.count else None
-
-
-@dataclass
-class _Scan:
-    schemas: dict[int, Schema] = field(default_factory=dict)
-    channels: dict[int, Channel] = field(default_factory=dict)
-    compression: str = "zstd"
-    error: str = ""
-    complete: bool = False  # the footer was reached
 
 
 def format_stamp(ns: int | None) -> str:
@@ -62,52 +58,16 @@ def format_stamp(ns: int | None) -> str:
     return f"{iso.replace('+00:00', 'Z')} ({ns} ns)"
 
 
-def read_records(path: Path, scan: _Scan) -> Iterator[Message]:
-    """The messages of an MCAP file in file order, up to the first record that is cut or
-    corrupt; schemas and channels (and the chunk compression) are collected into ``scan``, and
-    why the walk stopped into ``scan.error``. Only whole chunks yield messages."""
-    with path.open("rb") as f:
-        reader = StreamReader(f, emit_chunks=True, validate_crcs=True)
-        try:
-            for record in reader.records:
-                if isinstance(record, Chunk):
-                    scan.compression = _COMPRESSION_NAMES.get(record.compression, "zstd")
-                    inner = breakup_chunk(record, validate_crc=True)
-                    # A chunk is written whole, then its messages count (the walk may stop at
-                    # the next record).
-                    for rec in inner:
-                        _collect(rec, scan)
-                    yield from (r for r in inner if isinstance(r, Message))
-                elif isinstance(record, Message):
-                    yield record
-                elif isinstance(record, Footer):
-                    scan.complete = True
-                else:
-                    _collect(record, scan)
-        except (EndOfFile, struct.error):  # a record cut short: the end of what was written
-            scan.error = "cut short, no footer"
-        except Exception as exc:  # a corrupt record: the end of what is readable
-            scan.error = f"{type(exc).__name__}: {exc}".rstrip(": ")
-        if not scan.complete and not scan.error:
-            scan.error = "no footer"
-
-
-def _collect(record: Any, scan: _Scan) -> None:
-    if isinstance(record, Schema):
-        scan.schemas[record.id] = record
-    elif isinstance(record, Channel):
-        scan.channels[record.id] = record
+def read_records(path: Path, scan: Scan) -> Iterator[Message]:
+    """The messages of every readable chunk of an MCAP file, in file order; schemas, channels,
+    the chunk compression, the unreadable stretches (``scan.gaps``) and why the read stopped
+    early (``scan.error``) are collected into ``scan``. Only whole chunks yield messages."""
+    return salvage_records(path, scan)
 
 
 def _summary(path: Path) -> Any:
-    """The file's MCAP summary (footer and summary section), or None when it has none."""
-    from mcap.reader import make_reader
-
-    try:
-        with path.open("rb") as f:
-            return make_reader(f).get_summary()
-    except Exception:
-        return None
+    """The file's MCAP summary (footer, and summary section with a matching CRC), or None."""
+    return file_summary(path)
 
 
 def is_intact(path: Path) -> bool:
@@ -185,7 +145,18 @@ def recover_file(src: Path, dst: Path, topics: dict[str, TopicInfo]) -> FileRepo
         writer.finish()
         out.flush()
         os.fsync(out.fileno())
-    return FileReport(src.name, False, stats, scan.error, rewritten=True)
+    return FileReport(
+        src.name, False, stats, scan.error, True, scan.gaps, dict(scan.unknown_channels)
+    )
+
+
+def check_file(path: Path) -> Scan:
+    """Read every chunk of a file (decompressed, CRCs checked) without writing anything: its
+    ``gaps`` and ``error`` say whether it needs recovering."""
+    scan = Scan()
+    for _ in read_records(path, scan):
+        pass
+    return scan
 
 
 def _bag_files(bag: Path) -> tuple[list[str], dict[str, TopicInfo]]:
@@ -243,7 +214,7 @@ def recover_bag(bag: str | Path, into: str | Path | None = None) -> list[FileRep
             reports.append(FileReport(name, False, FileStats(name), "file missing"))
             continue
         summary = _summary(src)
-        if summary is not None:
+        if summary is not None and _whole(src):
             reports.append(FileReport(name, True, _intact_stats(summary, name, topics)))
             if into is not None:
                 (out_dir / name).symlink_to(src.resolve())
@@ -258,6 +229,11 @@ def recover_bag(bag: str | Path, into: str | Path | None = None) -> list[FileRep
     return reports
 
 
+def _whole(path: Path) -> bool:
+    scan = check_file(path)
+    return not scan.gaps and not scan.error and not scan.unknown_channels
+
+
 def recovered_view(bag: str | Path) -> tuple[Path, list[FileReport]]:
     """A readable copy of ``bag`` in a new temporary directory (the caller removes it)."""
     view = Path(tempfile.mkdtemp(prefix="rig_bag_view_")) / Path(bag).name
@@ -265,21 +241,65 @@ def recovered_view(bag: str | Path) -> tuple[Path, list[FileReport]]:
 
 
 def describe(reports: list[FileReport]) -> list[str]:
-    """Lines for people: per file what was readable, per topic how many messages."""
+    """Lines for people: per file what was readable, each gap, per topic how many messages."""
     lines = []
     for r in reports:
         if r.intact:
-            state = "whole (footer and summary present), left as it was"
+            state = "whole (footer, summary and every chunk readable), left as it was"
         elif r.error == "file missing":
             state = "missing"
         else:
-            state = f"damaged ({r.error}); rewritten with a footer"
+            what = [f"{len(r.gaps)} unreadable stretch(es) skipped"] if r.gaps else []
+            what += [r.error] if r.error else []
+            state = f"damaged ({'; '.join(what) or 'summary'}); rewritten with a footer"
         lines.append(
             f"{r.name}: {state}; {r.stats.count} messages, last readable time "
             f"{format_stamp(r.last_ns)}"
         )
+        lines += [f"  gap: {describe_gap(g)}" for g in r.gaps]
+        lines += [f"  {line}" for line in describe_unknown_channels(r)]
         lines += [f"  {topic}: {n}" for topic, n in sorted(r.stats.counts.items())]
     return lines
+
+
+def describe_gap(gap: Gap) -> str:
+    """One gap for people: where, why, the time span and the messages lost per topic."""
+    where = f"bytes {gap.offset}..{gap.end_offset} unreadable ({gap.error})"
+    if gap.exact:
+        assert gap.start_ns is not None and gap.end_ns is not None
+        span = (
+            f"messages logged {format_stamp(gap.start_ns)} .. {format_stamp(gap.end_ns)} "
+            f"({(gap.end_ns - gap.start_ns) / 1e9:.3f} s, from the {gap.span_from})"
+        )
+    elif gap.start_ns is None and gap.end_ns is None:
+        span = "messages logged at unknown times (no readable message around it)"
+    elif gap.end_ns is None:
+        span = f"messages logged after {format_stamp(gap.start_ns)} (to the end of the file)"
+    elif gap.start_ns is None:
+        span = f"messages logged before {format_stamp(gap.end_ns)}"
+    else:
+        span = (
+            f"messages logged between {format_stamp(gap.start_ns)} and "
+            f"{format_stamp(gap.end_ns)} (the neighbouring readable messages, "
+            f"{(gap.end_ns - gap.start_ns) / 1e9:.3f} s)"
+        )
+    if gap.lost is None:
+        lost = "an unknown count of messages (no readable message index for it)"
+    else:
+        per_topic = ", ".join(f"{t} {n}" for t, n in sorted(gap.lost.items()))
+        lost = f"{gap.lost_count} messages ({per_topic})"
+    return f"{where}: {span}; lost {lost}"
+
+
+def describe_unknown_channels(report: FileReport) -> list[str]:
+    if not report.unknown_channels:
+        return []
+    ids = ", ".join(f"{cid} ({n})" for cid, n in sorted(report.unknown_channels.items()))
+    n = sum(report.unknown_channels.values())
+    return [
+        f"{n} readable message(s) of channel(s) {ids} dropped: their channel record was in an "
+        "unreadable stretch and the file has no summary to name them"
+    ]
 
 
 def last_readable_ns(reports: list[FileReport]) -> int | None:

@@ -1,5 +1,5 @@
 """``aero-rig bag recover BAG``: bag maintenance (footers and metadata.yaml back after a
-recorder crash)."""
+recorder crash; every intact chunk of a file damaged in the middle kept, each gap named)."""
 
 import argparse
 import sys
@@ -15,13 +15,16 @@ def add_parser(subparsers: Any) -> None:
     p = bag_sub.add_parser(
         "recover",
         help="rewrite the MCAP files that lost their footer (kill -9, power loss) up to their "
-        "last complete chunk, and metadata.yaml (like ros2 bag reindex)",
+        "last complete chunk, or hold damaged chunks (skipped, every intact one kept; each gap "
+        "printed with its time span and the messages lost per topic), and metadata.yaml (like "
+        "ros2 bag reindex)",
     )
     p.add_argument("bag", metavar="BAG", help="rosbag2 directory (MCAP storage)")
 
 
 def recover(args: argparse.Namespace) -> int:
-    """``aero-rig bag recover BAG``: footers and metadata.yaml back after a recorder crash."""
+    """``aero-rig bag recover BAG``: footers and metadata.yaml back after a recorder crash,
+    and every intact chunk of a damaged file kept (each gap printed)."""
     from rig_runtime.bag_recover import describe, format_stamp, last_readable_ns, recover_bag
 
     try:
@@ -32,8 +35,17 @@ def recover(args: argparse.Namespace) -> int:
     for line in describe(reports):
         print(line)
     damaged = [r for r in reports if not r.intact]
+    gaps = [g for r in reports for g in r.gaps]
+    lost = [g.lost_count for g in gaps]
+    skipped = ""
+    if gaps:
+        unknown = f"; {lost.count(None)} stretch(es) of unknown count" if None in lost else ""
+        skipped = (
+            f"{len(gaps)} unreadable stretch(es) skipped ({sum(n or 0 for n in lost)} messages "
+            f"lost in them{unknown}); "
+        )
     print(
-        f"{args.bag}: {len(damaged)} of {len(reports)} file(s) recovered; "
+        f"{args.bag}: {len(damaged)} of {len(reports)} file(s) recovered; {skipped}"
         f"{sum(r.stats.count for r in reports)} messages; last readable time "
         f"{format_stamp(last_readable_ns(reports))}; metadata.yaml rewritten"
     )
