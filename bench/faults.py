@@ -1,34 +1,56 @@
 """Fault-injection benchmark: the short campaign under load and faults, with what each cost.
 
-Runs `aero-rig campaign --plan short` (the simulated process graph on Cyclone DDS) once idle
-as the reference, then once per fault:
+Runs `aero-rig campaign --plan short` (the simulated process graph on the environment's
+backend: ``RIG_RUNTIME_BACKEND``, else rclpy where it imports; ``--backend dds|rclpy`` sets it)
+once idle as the reference, then once per fault:
 
 - ``starved``: two busy processes per core at the stream nodes' priority (nice 5), whole run;
 - ``paused``: SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run;
 - ``recorder_late``: the recorder started 5 s after the rest of the graph (rig_runtime Launcher);
 - ``lift_killed``: kill -9 of the lift node once realization 0 of level 1 is complete;
 - ``never_ready``: the identifier missing from the processes but named in the barrier;
-- ``generator_frozen``: the generator stopped for 35 s, longer than the simulated actuator's
+- ``frozen``: the generator stopped for 35 s, longer than the simulated actuator's
   30 s stream timeout, so the actuator runs on in real time (the first wave's corruption).
+
+Past the DDS participant lease (issue 21; ``lease`` is the backend's
+rig_runtime.ros_environment.PARTICIPANT_LEASE_S: dds 10 s, rclpy 20 s):
+
+- ``identifier_paused``: the identifier stopped for lease + 5 s right after the start barrier;
+- ``sim_actuator_paused_long``, ``sim_wing_paused_long``, ``lift_paused_long``,
+  ``generator_paused_long``, ``recorder_paused_long``: that node stopped for lease + 5 s
+  mid-run (once the identifier logs its first realization complete); for the recorder,
+  ``recorder_gap`` says whether the bag's loss is named (exit 3, each topic that lost samples
+  listed) or nothing was lost (a clean run), or else that it was silent;
+- ``killed_in_final``: kill -9 of the identifier's refit worker during the final
+  identification (after the generator's "plan finished" and the identifier's "[final]" refit);
+- ``identifier_killed_in_final``: kill -9 of the identifier itself then.
 
 Per case: exit code, samples lost (plan samples without a message on a stream topic of the
 bag), periods and sine records excluded, anomalies, whether Table 1 (all levels) is byte for
-byte the idle run's, wall time, and the start barrier's wait.
+byte the idle run's, wall time, the start barrier's wait, the final identification recovered
+from the bag (campaign.json ``recovered_from_bag``), seconds from the plan's end (the generator's
+"plan finished" log stamp) to the campaign's exit, whether the campaign ended by its
+``--timeout`` (it must not), and what the fault did.
 
-    .venv/bin/python bench/faults.py [--cases starved,paused,...]
+    .venv/bin/python bench/faults.py [--backend dds|rclpy] [--cases starved,paused,...]
+                                     [--timeout S]  # each campaign's --timeout, default 300
 
-Last line: JSON {case: {...}} with those figures.
+Last line: JSON {case: {...}} with those figures; each campaign's output is kept as
+``<case>.out`` next to the run directories.
 """
 
 import argparse
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +62,7 @@ from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import EXPERIMENT_PLAN
 from rig_runtime.launcher import Launcher, node_command
 from rig_runtime.messages import stamp_to_ns
+from rig_runtime.ros_environment import BACKEND_ENV, PARTICIPANT_LEASE_S, backend_name
 from rig_runtime.testing import (
     BusyProcesses,
     finish,
@@ -53,33 +76,86 @@ from rig_runtime.testing import (
 
 SIM = package_share("aero_rig") / "config" / "sim.yaml"
 MEMBERS = ["sim_actuator", "sim_wing", "lift", "identifier", "recorder"]
+STREAM_NODES = ("sim_actuator", "sim_wing", "lift")
+LONG_PAUSE_PAST_LEASE_S = 5.0  # a long pause: the backend's participant lease + this
+PLAN_FINISHED = "plan finished"
+# a node's log line: "[INFO] [<epoch s>.<fraction>] [<node>]: <message>" (both backends)
+LOG_STAMP = re.compile(r"^\[[A-Z]+\] \[(\d+\.\d+)\]")
+
+# What a fault does to the run's graph, given the campaign's process; a note on what it did.
+Fault = Callable[[subprocess.Popen[str]], str | None]
+
+
+@dataclass
+class Run:
+    """One campaign (or launcher) run as the benchmark saw it."""
+
+    code: int
+    wall: float  # wall seconds from the start to the exit
+    text: str  # the campaign's stdout + stderr
+    exited_at: float | None = None  # epoch seconds of the exit
+    fault: str | None = None  # what the fault did
 
 
 def _log_has(path: Path, text: str) -> bool:
     return path.exists() and text in path.read_text(errors="replace")
 
 
-def campaign(
-    run: Path, extra: list[str], during: Callable[[subprocess.Popen[str]], None] | None = None
-) -> tuple[int, float, str]:
+def _log_stamp(path: Path, text: str) -> float | None:
+    """The epoch stamp of the first line of a node log holding ``text``."""
+    if not path.exists():
+        return None
+    for line in path.read_text(errors="replace").splitlines():
+        if text in line and (match := LOG_STAMP.match(line)):
+            return float(match.group(1))
+    return None
+
+
+def _exit_clock(pid: int) -> Callable[[], float | None]:
+    """Epoch seconds at which child ``pid`` exits, read after it has (waitid without reaping:
+    the process's own wait still reaps it), even while a fault is still being injected."""
+    exited: list[float] = []
+
+    def watch() -> None:
+        try:
+            os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT)
+        except ChildProcessError:  # already reaped: the caller's own clock
+            return
+        exited.append(time.time())
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+
+    def when() -> float | None:
+        thread.join(timeout=1.0)
+        return exited[0] if exited else None
+
+    return when
+
+
+def campaign(run: Path, extra: list[str], timeout: float, during: Fault | None = None) -> Run:
     """One `aero-rig campaign --plan short`; ``during(proc)`` injects the fault."""
     started = time.monotonic()
     proc = start_session(
         [
             *(sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", "short", "--quiet"),
-            *("--out", str(run), "--timeout", "900", *extra),
+            *("--out", str(run), "--timeout", f"{timeout:g}", *extra),
         ],
         graph_env(),
     )
+    exited_at = _exit_clock(proc.pid)
+    note = None
     try:
         if during is not None:
-            during(proc)
+            note = during(proc)
     finally:
-        out, err = finish(proc, 1200)
-    return proc.returncode, time.monotonic() - started, out + err
+        out, err = finish(proc, timeout + 300)
+        now = time.time()
+    at = exited_at() or now
+    return Run(proc.returncode, time.monotonic() - started - (now - at), out + err, at, note)
 
 
-def recorder_late(run: Path) -> tuple[int, float, str]:
+def recorder_late(run: Path) -> Run:
     """The graph without its recorder, which is started 5 s later by hand."""
     env = graph_env()
     join_graph(env)
@@ -114,21 +190,87 @@ def recorder_late(run: Path) -> tuple[int, float, str]:
         if recorder is not None:
             recorder.send_signal(signal.SIGINT)
             recorder.wait(timeout=30)
-    return max(codes.values(), key=abs), time.monotonic() - started, ""
+    return Run(max(codes.values(), key=abs), time.monotonic() - started, "", time.time())
 
 
-def after_first_realization(
-    run: Path, node: str, fault: Callable[[Any], None]
-) -> Callable[[subprocess.Popen[str]], None]:
-    """A ``during`` for :func:`campaign`: ``fault(process of node)`` once the identifier has
-    the first realization complete."""
+def after_log(
+    run: Path, log: str, text: str, node: str, fault: Callable[[Any], str | None]
+) -> Fault:
+    """A ``during`` for :func:`campaign`: ``fault(process of node)`` once ``logs/<log>.log``
+    holds ``text`` (bounded wait); says so when the wait or the node is missing."""
 
-    def inject(proc: subprocess.Popen[str]) -> None:
-        log = run / "logs" / "identifier.log"
-        wait_for(lambda: _log_has(log, "realization 0 complete"), 300)
+    def inject(proc: subprocess.Popen[str]) -> str | None:
+        if not wait_for(lambda: _log_has(run / "logs" / f"{log}.log", text), 300):
+            return f"not injected: no {text!r} in {log}.log"
         target = node_process(proc.pid, node)
-        if target is not None:
-            fault(target)
+        if target is None:
+            return f"not injected: no {node} process"
+        return fault(target)
+
+    return inject
+
+
+def after_first_realization(run: Path, node: str, fault: Callable[[Any], str | None]) -> Fault:
+    """``fault(process of node)`` once the identifier has the first realization complete."""
+    return after_log(run, "identifier", "realization 0 complete", node, fault)
+
+
+def after_barrier(run: Path, node: str, fault: Callable[[Any], str | None]) -> Fault:
+    """``fault(process of node)`` once the generator has passed its start barrier."""
+    return after_log(run, "generator", "start barrier passed", node, fault)
+
+
+def paused_for(seconds: float) -> Callable[[Any], str | None]:
+    """SIGSTOP for ``seconds``, then SIGCONT (the pause is the fault, not a readiness guess)."""
+
+    def fault(target: Any) -> str | None:
+        import psutil
+
+        started = time.monotonic()
+        try:
+            pause(target, seconds)
+        except psutil.Error:  # stopped by the campaign while paused
+            return f"paused; the process was gone after {time.monotonic() - started:.1f} s"
+        return f"paused {seconds:g} s"
+
+    return fault
+
+
+def killed(target: Any) -> str | None:
+    target.kill()
+    return f"killed pid {target.pid}"
+
+
+def kill_in_final(run: Path, node: str) -> Fault:
+    """kill -9 of the identifier's refit worker (``node`` "refit_worker") or of ``node`` once the
+    generator logged the plan's end and the identifier started its final refit."""
+    logs = run / "logs"
+
+    def inject(proc: subprocess.Popen[str]) -> str | None:
+        import psutil
+
+        if not wait_for(lambda: _log_has(logs / "generator.log", PLAN_FINISHED), 300):
+            return "not injected: the plan did not finish"
+        if not wait_for(lambda: _log_has(logs / "identifier.log", "[final]"), 300):
+            return "not injected: no final refit in identifier.log"
+        identifier = node_process(proc.pid, "identifier")
+        if identifier is None:
+            return "not injected: no identifier process"
+        target = identifier
+        if node == "refit_worker":
+            workers = []
+            for child in identifier.children(recursive=True):
+                try:
+                    if any("spawn_main" in part for part in child.cmdline()):
+                        workers.append(child)
+                except psutil.Error:
+                    continue
+            if not workers:
+                return "not injected: no refit worker under the identifier"
+            target = workers[0]
+        done = _log_has(logs / "identifier.log", "final Table 1")
+        target.kill()
+        return f"killed {node} (pid {target.pid}); final refit already done then: {done}"
 
     return inject
 
@@ -175,52 +317,118 @@ def measure(run: Path, reference: Path | None) -> dict[str, Any]:
         figures["barrier_wait_s"] = float(
             log.read_text().split("start barrier passed after ")[1].split(" s")[0]
         )
+    summary = run / "campaign.json"
+    if summary.exists():
+        recovered = json.loads(summary.read_text()).get("recovered_from_bag")
+        if recovered is not None:
+            recovered = {k: v for k, v in recovered.items() if k != "from"}
+        figures["recovered"] = recovered
     return figures
 
 
+def recorder_gap(figures: dict[str, Any], text: str) -> str:
+    """Whether a run's bag loss is named: exit 3 with each topic that lost samples listed among
+    the campaign's problems ("  - ..."), or nothing lost and a clean exit; else silent."""
+    lost = figures.get("samples_lost")
+    if not isinstance(lost, dict):
+        return f"no bag to check ({lost}); exit {figures['exit_code']}"
+    lossy = [t for t, n in lost.items() if n]
+    if not lossy:
+        return "nothing lost" + (
+            "" if figures["exit_code"] == 0 else f", but exit {figures['exit_code']}"
+        )
+    listed = [line for line in text.splitlines() if line.startswith("  - ")]
+    unnamed = [t for t in lossy if not any(t in line for line in listed)]
+    if figures["exit_code"] == 3 and not unnamed:
+        return "named: exit 3, " + "; ".join(x.strip("- ") for x in listed if "bag" in x)
+    return f"SILENT: samples lost on {lossy}, exit {figures['exit_code']}, not listed: {unnamed}"
+
+
 def main() -> int:
-    all_cases = ["starved", "paused", "recorder_late", "lift_killed", "never_ready", "frozen"]
+    long_cases = [f"{n}_paused_long" for n in (*STREAM_NODES, "generator", "recorder")]
+    all_cases = [
+        *("starved", "paused", "recorder_late", "lift_killed", "never_ready", "frozen"),
+        *("identifier_paused", *long_cases, "killed_in_final", "identifier_killed_in_final"),
+    ]
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default=",".join(all_cases), help="comma-separated cases")
+    parser.add_argument(
+        "--backend",
+        choices=("dds", "rclpy"),
+        default=None,
+        help=f"runtime backend (sets {BACKEND_ENV}; default: the environment's)",
+    )
+    parser.add_argument(
+        "--timeout", type=float, default=300.0, help="each campaign's --timeout [s]"
+    )
     args = parser.parse_args()
     cases = [c for c in args.cases.split(",") if c]
+    unknown = sorted(set(cases) - set(all_cases))
+    if unknown:
+        parser.error(f"unknown case(s) {unknown}; known: {', '.join(all_cases)}")
+    if args.backend:
+        os.environ[BACKEND_ENV] = args.backend
+    backend = backend_name()
+    long_pause = PARTICIPANT_LEASE_S[backend] + LONG_PAUSE_PAST_LEASE_S
     root = Path(tempfile.mkdtemp(prefix="bench_faults_"))
+    print(
+        f"backend {backend}: participant lease {PARTICIPANT_LEASE_S[backend]:g} s, long pauses "
+        f"{long_pause:g} s, campaign timeout {args.timeout:g} s; {os.cpu_count()} cores",
+        flush=True,
+    )
     results: dict[str, dict[str, Any]] = {}
 
-    def record(name: str, code: int, wall: float, text: str, reference: Path | None) -> None:
-        figures = {"exit_code": code, "wall_s": round(wall, 1), **measure(root / name, reference)}
-        lines = [line for line in text.splitlines() if "error" in line.lower()][-2:]
+    def record(name: str, run: Run, reference: Path | None) -> None:
+        (root / f"{name}.out").write_text(run.text)  # the campaign's own output, for evidence
+        figures: dict[str, Any] = {"exit_code": run.code, "wall_s": round(run.wall, 1)}
+        figures |= measure(root / name, reference)
+        plan_end = _log_stamp(root / name / "logs" / "generator.log", PLAN_FINISHED)
+        if plan_end is not None and run.exited_at is not None:
+            figures["plan_end_to_exit_s"] = round(run.exited_at - plan_end, 1)
+        else:
+            figures["plan_end_to_exit_s"] = None  # the plan never finished
+        figures["timed_out"] = "timeout after" in run.text
+        if run.fault is not None:
+            figures["fault"] = run.fault
+        if name == "recorder_paused_long":
+            figures["recorder_gap"] = recorder_gap(figures, run.text)
+        lines = [
+            line
+            for line in run.text.splitlines()
+            if "error" in line.lower() and not line.startswith("|")  # not Table 1's header
+        ][-2:]
         if lines:
             figures["error_lines"] = lines
         results[name] = figures
         print(f"{name}: {json.dumps(figures)}", flush=True)
 
-    code, wall, text = campaign(root / "idle", [])
-    record("idle", code, wall, text, None)
-    reference = root / "idle" / "table1_all_levels.md"
+    def run_case(name: str, during: Fault | None = None, extra: list[str] | None = None) -> None:
+        record(name, campaign(root / name, extra or [], args.timeout, during), reference)
 
-    def after_t0(proc: subprocess.Popen[str], name: str) -> None:
-        log = root / name / "logs" / "generator.log"
-        wait_for(lambda: _log_has(log, "start barrier passed"), 120)
+    record("idle", campaign(root / "idle", [], args.timeout), None)
+    reference = root / "idle" / "table1_all_levels.md"
 
     if "starved" in cases:
         with BusyProcesses(2 * (os.cpu_count() or 2), nice=5):
-            record("starved", *campaign(root / "starved", []), reference)
+            run_case("starved")
     if "paused" in cases:
 
-        def pause_each(proc: subprocess.Popen[str]) -> None:
-            after_t0(proc, "paused")
+        def pause_each(proc: subprocess.Popen[str]) -> str | None:
+            log = root / "paused" / "logs" / "generator.log"
+            wait_for(lambda: _log_has(log, "start barrier passed"), 120)
+            done = []
             for node in ("generator", "sim_actuator", "sim_wing", "lift", "identifier", "recorder"):
                 target = node_process(proc.pid, node)
                 if target is not None:
                     pause(target, 3.0)
+                    done.append(node)
+            return f"paused 3 s each: {', '.join(done)}"
 
-        record("paused", *campaign(root / "paused", [], pause_each), reference)
+        run_case("paused", pause_each)
     if "recorder_late" in cases:
-        record("recorder_late", *recorder_late(root / "recorder_late"), reference)
+        record("recorder_late", recorder_late(root / "recorder_late"), reference)
     if "lift_killed" in cases:
-        kill_lift = after_first_realization(root / "lift_killed", "lift", lambda p: p.kill())
-        record("lift_killed", *campaign(root / "lift_killed", [], kill_lift), reference)
+        run_case("lift_killed", after_first_realization(root / "lift_killed", "lift", killed))
         fit = subprocess.run(
             [
                 *(sys.executable, "-m", "aero_rig.cli", "fit", str(root / "lift_killed" / "bag")),
@@ -242,12 +450,21 @@ def main() -> int:
         path.write_text(yaml.safe_dump(graph))
         extra = ["--graph", str(path), "-p", "generator.start_timeout_s:=10"]
         extra += ["-p", f"generator.barrier_nodes:=[{', '.join(MEMBERS)}]"]
-        record("never_ready", *campaign(root / "never_ready", extra), reference)
+        run_case("never_ready", extra=extra)
     if "frozen" in cases:
-        freeze_generator = after_first_realization(
-            root / "frozen", "generator", lambda p: pause(p, 35.0)
-        )
-        record("frozen", *campaign(root / "frozen", [], freeze_generator), reference)
+        run_case("frozen", after_first_realization(root / "frozen", "generator", paused_for(35.0)))
+    if "identifier_paused" in cases:
+        name = "identifier_paused"
+        run_case(name, after_barrier(root / name, "identifier", paused_for(long_pause)))
+    for name in long_cases:
+        if name in cases:
+            node = name.removesuffix("_paused_long")
+            run_case(name, after_first_realization(root / name, node, paused_for(long_pause)))
+    if "killed_in_final" in cases:
+        run_case("killed_in_final", kill_in_final(root / "killed_in_final", "refit_worker"))
+    if "identifier_killed_in_final" in cases:
+        name = "identifier_killed_in_final"
+        run_case(name, kill_in_final(root / name, "identifier"))
     print(f"run directories: {root}")
     print(json.dumps(results))
     return 0
