@@ -244,6 +244,8 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
         ident._collect()
         assert ident.refits == 1 and "refit failed (second)" in ident.errors[-1]
         assert ident.models_stale  # the new worker has no models: the next refit is full
+        # The job the worker died in is queued again (a final identification is never lost).
+        assert ident.pending[-1][:3] == (-1, False, "second")
         ident._start_refit(True, "third")
         assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
         ident._collect()

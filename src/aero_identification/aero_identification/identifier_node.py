@@ -44,6 +44,7 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
     joint_position,
 )
+from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
 from . import refit_worker
 from .campaign import CampaignAssembler
@@ -52,6 +53,7 @@ from .quality import data_quality_lines
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
 
+TIMER_PERIOD_S = 0.1  # intake timer: refits start, worker results are collected
 MAX_LOGGED_GAPS = 10  # gaps logged one by one per channel; the status counts them all
 
 PARAMETERS = [
@@ -156,7 +158,11 @@ class Identifier:
             self.on_anomaly,
             EXPERIMENT_ANOMALY.qos,
         )
-        node.create_timer(0.1, self.on_timer)
+        self.future_final = False
+        self.lease_s = PARTICIPANT_LEASE_S.get(node.backend_name, max(PARTICIPANT_LEASE_S.values()))
+        self.last_tick = time.monotonic()
+        self.stopped_s: list[float] = []  # how long this process did not run, past the lease
+        node.create_timer(TIMER_PERIOD_S, self.on_timer)
         node.create_timer(1.0, self.publish_status)
         self.publish_status()
 
@@ -282,6 +288,23 @@ class Identifier:
 
     # -- refits ---------------------------------------------------------------------------
     def on_timer(self) -> None:
+        now = time.monotonic()
+        stopped = now - self.last_tick - TIMER_PERIOD_S
+        self.last_tick = now
+        if stopped > self.lease_s:
+            # The intake did not run for longer than the DDS lease: the process was stopped
+            # (SIGSTOP, a debugger, a suspended laptop, swap), and its peers dropped it with
+            # what they had not delivered, or it was starved (nothing lost then).
+            self.stopped_s.append(stopped)
+            self.node.logger.warning(
+                "this node's intake did not run for %.1f s, past the DDS participant lease "
+                "(%g s): if the process was stopped, the samples published meanwhile are lost "
+                "for it (the gaps follow); the recorder's bag holds them, and the campaign "
+                "recovers the final identification from it",
+                stopped,
+                self.lease_s,
+            )
+            self.publish_status()
         if self.future is not None and self.future.done():
             self._collect()
         if self.future is not None or not self.pending or self.assembler is None:
@@ -312,6 +335,7 @@ class Identifier:
             reason,
             " [final]" if final else "",
         )
+        self.future_final = final
         args = (self.assembler, self.config, final, self.out_dir, reuse)
         if self.executor is not None:
             self.future = self.executor.submit(refit_worker.refit, *args)
@@ -334,10 +358,13 @@ class Identifier:
             self.node.logger.error("%s; the previous models are kept", self.errors[-1])
             self.future = None
             if isinstance(exc, BrokenProcessPool) and self.executor is not None:
-                # The worker died (killed, out of memory): a new one, which fits afresh.
+                # The worker died (killed, out of memory): a new one, which fits afresh. The
+                # job it died in is queued again (at once: its data are in), so a final
+                # identification is never lost with its worker.
                 self.executor.shutdown(wait=False, cancel_futures=True)
                 self._start_worker()
                 self.models_stale = True
+                self.pending.append((-1, self.future_final, self.future_reason, True))
             self.publish_status()
             return
         self.future = None
@@ -403,6 +430,10 @@ class Identifier:
             "pitch_samples": str(self.samples["u"]),
             "cl_samples": str(self.samples["y"]),
         }
+        if self.stopped_s:
+            values["stopped"] = (
+                f"{len(self.stopped_s)} time(s) past the DDS lease, last {self.stopped_s[-1]:.1f} s"
+            )
         for channel, name in (("u", "pitch"), ("y", "C_l")):
             gaps = self.gaps[channel]
             if gaps:
@@ -442,7 +473,7 @@ class Identifier:
             values["anomalies"] = "; ".join(quality["anomalies"])
         if quality.get("excluded_sines"):
             values["excluded sine records"] = "; ".join(quality["excluded_sines"])
-        gapped = any(self.gaps.values())
+        gapped = any(self.gaps.values()) or bool(self.stopped_s)
         level = 2 if self.errors else (1 if excluded or warnings or problems or gapped else 0)
         message = values["state"]
         msg = diagnostic_array(

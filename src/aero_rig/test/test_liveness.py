@@ -60,3 +60,12 @@ def test_a_silent_identifier_is_reported_mid_run_and_stalls_after_the_end() -> N
     never = Liveness(12.0, total=100)
     never.plan_ended(0.0)
     assert "never" in (never.check(13.0) or "")
+
+
+def test_an_identifier_holding_every_sample_but_not_done_is_named_so() -> None:
+    live = Liveness(12.0, total=100)
+    live.plan_ended(0.0)
+    for t in range(14):
+        live.status(float(t), "collecting", (100, 100))
+    reason = live.check(13.0)
+    assert reason is not None and "holds every plan sample" in reason

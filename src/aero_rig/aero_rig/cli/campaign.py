@@ -21,7 +21,7 @@ from rig_runtime import ros_environment
 from rig_runtime.graph import GraphError, load_graph
 from rig_runtime.launcher import Launcher, parse_overrides
 
-from ..verdict import run_problems
+from ..verdict import bag_problems, run_problems
 from .common import (
     EXIT_FAILED,
     EXIT_NOT_CLEAN,
@@ -112,8 +112,14 @@ def main(args: argparse.Namespace) -> int:
             launcher.failure = outcome.stalled
     elif not launcher.failure and (missed := samples_missed(run_dir)):
         # The identifier finished without samples the recorder may hold (it was paused past
-        # the DDS lease, which dropped it as a reader): the bag decides.
-        recovered = recover_from_bag(run_dir, launcher, missed)
+        # the DDS lease, which dropped it as a reader): the bag decides, unless it is short of
+        # samples itself (then a second fit would only repeat the loss).
+        short = bag_problems(run_dir / "bag", outcome.total) if outcome.total else []
+        if short:
+            print(f"aero-rig: {missed}; the bag lacks samples too ({short[0]}): no recovery",
+                  file=sys.stderr)  # fmt: skip
+        else:
+            recovered = recover_from_bag(run_dir, launcher, missed)
     if launcher.failure:
         print(f"aero-rig: campaign failed: {launcher.failure}", file=sys.stderr)
         print(

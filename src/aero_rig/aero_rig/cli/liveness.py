@@ -79,6 +79,12 @@ class Liveness:
             self.bound_s
         ):
             pitch, cl = self.samples
+            if self.total and min(pitch, cl) >= self.total:
+                return (
+                    f"identifier stalled: it holds every plan sample but has not finished its "
+                    f"final identification {since_end:.0f} s after the plan ended (its refit "
+                    "failed, or the plan's end on /experiment/segment was lost)"
+                )
             return (
                 f"identifier stalled: still collecting {since_end:.0f} s after the plan ended, "
                 f"holding {pitch} pitch and {cl} C_l samples of {self.total} per channel; it "
