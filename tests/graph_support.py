@@ -91,25 +91,18 @@ class PeerReaders:
 
     def matched(self, topics: list[str]) -> bool:
         """Every topic has a reader in some node's report, and every such reader is matched."""
-        readers = [
-            e
-            for r in self.reports.values()
-            for e in r.endpoints
-            if e.kind == "reader" and e.topic in topics
-        ]
-        return {e.topic for e in readers} >= set(topics) and all(
-            e.matched_count > 0 for e in readers
-        )
+        return self._matched("reader", topics)
 
     def writers_matched(self, topics: list[str]) -> bool:
         """Every topic has a writer in some node's report, and every such writer has matched a
         reader (the test's own, once the node under test has seen it)."""
-        writers = [
+        return self._matched("writer", topics)
+
+    def _matched(self, kind: str, topics: list[str]) -> bool:
+        ends = [
             e
             for r in self.reports.values()
             for e in r.endpoints
-            if e.kind == "writer" and e.topic in topics
+            if e.kind == kind and e.topic in topics
         ]
-        return {e.topic for e in writers} >= set(topics) and all(
-            e.matched_count > 0 for e in writers
-        )
+        return {e.topic for e in ends} >= set(topics) and all(e.matched_count > 0 for e in ends)
