@@ -10,6 +10,7 @@ A source adapter turns its data into a `Dataset` (docs/design.md §7.1):
 `report.write_report` writes one report for all of them.
 """
 
+import fnmatch
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -59,6 +60,14 @@ class LevelRecord:
     def input_rms(self) -> float:
         """RMS of the input around its mean, over the usable periods (nan without data)."""
         return float(np.std(self.data.u)) if self.data is not None else float("nan")
+
+    def matches(self, token: str) -> bool:
+        """Whether a user's level selector names this level: equal to its name, key, file stem
+        or file name, or a glob matching one (e.g. "3", "F16Data_FullMSine_Level3", "*Level3*")."""
+        names = [self.name, self.key]
+        if self.path is not None:
+            names += [self.path.stem, self.path.name]
+        return any(token == n or fnmatch.fnmatchcase(n, token) for n in names if n)
 
     @property
     def label(self) -> str:
@@ -116,27 +125,13 @@ class Dataset:
         raise KeyError(name)
 
     def select(self, tokens: Sequence[str]) -> list[str]:
-        """Names of the levels a user's selectors name (level name, key, file stem or glob);
-        ValueError naming the selector that matches nothing."""
-        import fnmatch
-
+        """Names of the levels a user's selectors name (`LevelRecord.matches`); ValueError
+        naming the selector that matches nothing."""
         out: list[str] = []
-        names = [lv.name for lv in self.levels]
         for token in tokens:
-            hit = [
-                lv.name
-                for lv in self.levels
-                if any(
-                    token == n or fnmatch.fnmatchcase(n, token)
-                    for n in (
-                        lv.name,
-                        lv.key,
-                        *((lv.path.stem, lv.path.name) if lv.path is not None else ()),
-                    )
-                    if n
-                )
-            ]
+            hit = [lv.name for lv in self.levels if lv.matches(token)]
             if not hit:
+                names = [lv.name for lv in self.levels]
                 raise ValueError(f"level {token!r} matches no level; levels: {names}")
             out += [h for h in hit if h not in out]
         return out

@@ -26,7 +26,6 @@ not carry the excitation plan.
 """
 
 import csv
-import fnmatch
 import math
 import re
 from collections.abc import Sequence
@@ -85,13 +84,6 @@ def level_name(path: str | Path) -> str:
     stem = Path(path).stem
     match = re.search(r"level[_\- ]?(\d+)", stem, flags=re.IGNORECASE)
     return str(int(match.group(1))) if match else stem
-
-
-def matches_level(token: str, record: LevelRecord) -> bool:
-    """Whether a user's level selector names this record: equal to its short name or file stem,
-    or a glob pattern matching either (e.g. "3", "F16Data_FullMSine_Level3", "*Level3*")."""
-    names = (record.name, *((record.path.stem, record.path.name) if record.path else ()))
-    return any(token == n or fnmatch.fnmatchcase(n, token) for n in names)
 
 
 def detect_excited_lines(
@@ -417,10 +409,11 @@ def read_record(
         f"{lines.size} excited lines detected in the input, {lines[0] * df:g} … "
         f"{lines[-1] * df:g} Hz"
     )
+    name = level_name(path)
     return LevelRecord(
-        level_name(path),
+        name,
         data,
-        key=level_name(path),
+        key=name,
         path=path,
         periods_in_file=P,
         dropped_periods=drop_periods,
