@@ -32,13 +32,17 @@ Parallel: the candidates are independent fits. With `client` (a ``dask.distribut
 e.g. of a cluster started with ``dask scheduler`` / ``dask worker``) they run on its workers;
 otherwise, with ``workers > 1`` (default: every core), on a local Dask cluster of single-
 threaded worker processes (numba kernels load from their on-disk cache once per process);
-``workers=1`` runs them one after the other in this process.
+``workers=1`` runs them one after the other in this process. The local workers do not re-run
+the caller's script, so a plain script without an ``if __name__ == "__main__":`` guard, a
+notebook and the CLI all work with the defaults (`_workers_without_main_script`).
 """
 
+import contextlib
 import math
 import os
+import sys
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -308,6 +312,7 @@ def _run(
         from dask.distributed import Client, LocalCluster
 
         with (
+            _workers_without_main_script(),
             LocalCluster(
                 n_workers=min(n, len(jobs)),
                 threads_per_worker=1,
@@ -321,6 +326,32 @@ def _run(
                 f"local Dask cluster, {min(n, len(jobs))} worker processes"
             )
     return _on_client(client, jobs, data, validation, options), f"Dask client {client}"
+
+
+@contextlib.contextmanager
+def _workers_without_main_script() -> Iterator[None]:
+    """Start local worker processes without re-running the caller's script.
+
+    Dask's local workers are started with multiprocessing's "spawn", which re-imports the
+    parent's ``__main__`` in every child (by path for ``python script.py``, by name for
+    ``python -m``; multiprocessing.spawn.get_preparation_data). A script without an
+    ``if __name__ == "__main__":`` guard would then call scan_pnlss again inside each
+    worker while it bootstraps, and the worker fails ("Nanny failed to start"). The scan's
+    tasks need only this package, never the script, so while the workers are spawned the
+    main module shows neither a file nor a spec: the children skip it, as they do for an
+    interactive session or a notebook.
+    """
+    main = sys.modules.get("__main__")
+    saved = {k: main.__dict__[k] for k in ("__file__", "__spec__") if main and k in main.__dict__}
+    if main is None or (saved.get("__file__") is None and saved.get("__spec__") is None):
+        yield
+        return
+    main.__dict__.pop("__file__", None)
+    main.__spec__ = None
+    try:
+        yield
+    finally:
+        main.__dict__.update(saved)
 
 
 def _on_client(

@@ -118,3 +118,37 @@ def test_dask_cluster_selects_the_same_model_as_the_serial_scan() -> None:
         assert a.validation_error == pytest.approx(b.validation_error, rel=1e-9)
     np.testing.assert_allclose(remote.best.E, serial.best.E, rtol=1e-9, atol=1e-12)
     assert N == 1024 and P == 3  # the shared case's layout, as _split assumes
+
+
+GUARDLESS_SCRIPT = """
+import sys
+sys.path.insert(0, {test_dir!r})
+from test_pnlss_duffing import LINES, make_case
+from aero_identification import scan_pnlss
+from aero_identification.data import PeriodicData
+
+d = make_case(k3=1.0, seed=1).data
+train = PeriodicData(d.u[:, :, :1], d.y[:, :, :1], d.fs, LINES)
+val = PeriodicData(d.u[:, :, 1:], d.y[:, :, 1:], d.fs, LINES)
+scan = scan_pnlss(train, val, nx=(2,), degrees=((2,), (3,)), equations=("state",), max_iter=3,
+                  workers=2)
+print("WORKERS", scan.workers)
+print("SELECTED", scan.best_row.degrees)
+"""
+
+
+@pytest.mark.slow  # starts a local Dask cluster (worker processes)
+def test_scan_runs_from_a_script_without_a_main_guard(tmp_path: Path) -> None:
+    """Issue 22: the local workers must not re-run the caller's script (spawn re-imports
+    __main__; an unguarded script then failed with "Nanny failed to start")."""
+    import subprocess
+
+    script = tmp_path / "plain_scan.py"
+    script.write_text(GUARDLESS_SCRIPT.format(test_dir=str(Path(__file__).parent)))
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "WORKERS local Dask cluster, 2 worker processes" in done.stdout, done.stdout
+    assert "SELECTED" in done.stdout and "bootstrapping" not in done.stderr
+    assert "__main__" not in done.stderr or "Traceback" not in done.stderr
