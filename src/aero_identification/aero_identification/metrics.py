@@ -36,6 +36,54 @@ def relative_rms_error(y_true: np.ndarray, y_hat: np.ndarray) -> float:
     return float(np.sqrt(np.mean((y_true - y_hat) ** 2)) / spread)
 
 
+def relative_rms_error_spread(
+    y_true: np.ndarray, y_hat: np.ndarray, samples_per_period: int
+) -> float:
+    """Spread of the relative RMS error over the periods of a periodic record (Table 1's ±).
+
+    The record is cut into its P periods of ``samples_per_period`` samples; for each period p
+    the relative RMS error e_p = rms(y_p − ŷ_p) / rms(y_p − mean y_p) (`relative_rms_error`
+    applied to that period alone, centred on the period's own mean); the spread is their sample
+    standard deviation (ddof = 1) over the P periods. It measures the cycle-to-cycle variation
+    and noise of the measured record, not the variability of the model's training. The error
+    itself (Table 1's value) stays `relative_rms_error` over the whole record.
+
+    Args:
+        y_true: (P·samples_per_period,) measured output, whole periods.
+        y_hat: predicted output, same shape.
+        samples_per_period: samples in one period (≥ 1).
+
+    Returns:
+        std over the periods of e_p (ddof = 1); NaN for a single period (undefined).
+
+    Raises:
+        ValueError: for different shapes, a record that is not 1-D or not whole periods, a
+            non-positive ``samples_per_period``, or a period that `relative_rms_error` rejects
+            (empty, non-finite, constant).
+    """
+    y_true = np.asarray(y_true, dtype=float)
+    y_hat = np.asarray(y_hat, dtype=float)
+    if y_true.shape != y_hat.shape:
+        raise ValueError(
+            f"y_true and y_hat must have the same shape; got {y_true.shape} and {y_hat.shape}"
+        )
+    if y_true.ndim != 1:
+        raise ValueError(f"expected 1-D records; got shape {y_true.shape}")
+    n = int(samples_per_period)
+    if n < 1 or n != samples_per_period:
+        raise ValueError(f"samples_per_period must be a positive integer; got {samples_per_period}")
+    if y_true.size == 0 or y_true.size % n:
+        raise ValueError(f"the record's {y_true.size} samples are not whole periods of {n} samples")
+    periods = y_true.size // n
+    errors = [
+        relative_rms_error(y_true[p * n : (p + 1) * n], y_hat[p * n : (p + 1) * n])
+        for p in range(periods)
+    ]
+    if periods < 2:
+        return float("nan")
+    return float(np.std(errors, ddof=1))
+
+
 def interpolate_frf(bla: BLA, freq_hz: float | np.ndarray) -> np.ndarray:
     """BLA at arbitrary frequencies inside the excited band.
 

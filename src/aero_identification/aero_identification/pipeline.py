@@ -16,7 +16,9 @@ Every stage runs that the data allow:
    scan chooses its structure; and, when the source plans sines, the paper's "level 1" PNLSS
    trained on the lowest level alone;
 4. validation on the single sines (Table 1: relative RMS error rms(y − ŷ)/rms(y − mean y); BLA
-   FRF and BLA SS centred on the record's measured means, PNLSS absolute) and on held-out levels
+   FRF and BLA SS centred on the record's measured means, PNLSS absolute; each cell's ± is the
+   std over the sine's periods of the per-period error, `metrics.relative_rms_error_spread`)
+   and on held-out levels
    (``held_out``: never used by any fit, so their errors are test errors);
 5. with ``config.clustering_ablation`` (final only), the same pipeline without clustering, and
    what clustering changed (`clustering_effect`).
@@ -38,7 +40,12 @@ from .clustering import period_clusters
 from .config import IdentificationConfig
 from .data import PeriodicData, random_phase_period
 from .dataset import Dataset, LevelRecord, SineData
-from .metrics import predict_bla_sine, relative_rms_error, steady_state_response
+from .metrics import (
+    predict_bla_sine,
+    relative_rms_error,
+    relative_rms_error_spread,
+    steady_state_response,
+)
 from .models import LinearStateSpace, PNLSSModel
 from .monomials import structure_exponents
 from .pnlss import fit_pnlss, one_blas_thread, output_equation_start
@@ -498,6 +505,8 @@ def _signature(res: LevelResult, config: IdentificationConfig) -> bytes:
 def _validate(dataset: Dataset, result: IdentificationResult) -> None:
     result.errors_all.clear()
     result.errors_level1.clear()
+    result.spreads_all.clear()
+    result.spreads_level1.clear()
     result.predictions.clear()
     for rec in dataset.sines:
         _validate_sine(rec, result)
@@ -521,29 +530,43 @@ def _validate_sine(rec: SineData, result: IdentificationResult) -> None:
     f = round(rec.frequency_hz, 6)
     y_mean, u_mean = float(np.mean(rec.y)), float(np.mean(rec.u))
     preds: dict[str, np.ndarray] = {}
+
+    def score(
+        errors: dict[tuple[str, str, float], float],
+        spreads: dict[tuple[str, str, float], float],
+        model_name: str,
+        y_hat: np.ndarray,
+        may_diverge: bool = False,
+    ) -> None:
+        """Table 1's cell (error over all periods) and its ± (std of the per-period errors)."""
+        cell = (model_name, name, f)
+        if may_diverge and not np.all(np.isfinite(y_hat)):  # a diverged PNLSS simulation
+            errors[cell], spreads[cell] = float("inf"), float("nan")
+            return
+        errors[cell] = relative_rms_error(rec.y, y_hat)
+        spreads[cell] = relative_rms_error_spread(rec.y, y_hat, rec.samples_per_period)
+
     # Linear models predict deviations: centred on the record's measured means.
-    for lin_level, errors, key in (
-        (own, result.errors_all, "BLA SS (own level)"),
-        (low, result.errors_level1, "BLA SS (level 1)"),
+    for lin_level, errors, spreads, key in (
+        (own, result.errors_all, result.spreads_all, "BLA SS (own level)"),
+        (low, result.errors_level1, result.spreads_level1, "BLA SS (level 1)"),
     ):
         if lin_level.bla is None or lin_level.linear is None:
             continue
         y_frf = predict_bla_sine(lin_level.bla, rec.frequency_hz, rec.u, y_mean)
-        errors[("BLA FRF", name, f)] = relative_rms_error(rec.y, y_frf)
+        score(errors, spreads, "BLA FRF", y_frf)
         lin = lin_level.linear.with_operating_point(u_mean, y_mean)
         y_ss = steady_state_response(lin, rec.u, rec.samples_per_period)
-        errors[("BLA SS", name, f)] = relative_rms_error(rec.y, y_ss)
+        score(errors, spreads, "BLA SS", y_ss)
         preds[key] = y_ss
-    for model, errors, key in (
-        (result.pnlss_all, result.errors_all, "PNLSS (all levels)"),
-        (result.pnlss_level1, result.errors_level1, "PNLSS (level 1)"),
+    for model, errors, spreads, key in (
+        (result.pnlss_all, result.errors_all, result.spreads_all, "PNLSS (all levels)"),
+        (result.pnlss_level1, result.errors_level1, result.spreads_level1, "PNLSS (level 1)"),
     ):
         if model is None:
             continue
         y_hat = steady_state_response(model, rec.u, rec.samples_per_period)
-        errors[("PNLSS", name, f)] = (
-            relative_rms_error(rec.y, y_hat) if np.all(np.isfinite(y_hat)) else float("inf")
-        )
+        score(errors, spreads, "PNLSS", y_hat, may_diverge=True)
         preds[key] = y_hat
     result.predictions.append(
         {

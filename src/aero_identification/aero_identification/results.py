@@ -56,6 +56,10 @@ class IdentificationResult:
     pnlss_held_out: str = ""  # what chose the PNLSS iterate (pipeline.pnlss_sets)
     errors_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
     errors_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    # Table 1's ± per cell, same keys: std over the sine's periods of the per-period error
+    # (metrics.relative_rms_error_spread; NaN for a single period or a diverged model).
+    spreads_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    spreads_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
     held_out_errors: list[dict[str, Any]] = field(default_factory=list)
     predictions: list[dict[str, Any]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -92,11 +96,18 @@ class IdentificationResult:
         levels, freqs = self.level_names, self.sine_freqs
         tables: dict[str, tuple[str, str]] = {}
         if self.sines_planned or freqs:
-            tables["table1_all_levels"] = table1(self.errors_all, levels, freqs)
-            tables["table1_level1"] = table1(self.errors_level1, levels, freqs)
+            tables["table1_all_levels"] = table1(
+                self.errors_all, levels, freqs, spreads=self.spreads_all
+            )
+            tables["table1_level1"] = table1(
+                self.errors_level1, levels, freqs, spreads=self.spreads_level1
+            )
             if self.no_clustering is not None:
                 tables["table1_no_clustering"] = table1(
-                    self.no_clustering.errors_all, levels, freqs
+                    self.no_clustering.errors_all,
+                    levels,
+                    freqs,
+                    spreads=self.no_clustering.spreads_all,
                 )
         if self.held_out_errors:
             tables["validation_errors"] = held_out_table(self.held_out_errors)
@@ -134,6 +145,9 @@ class IdentificationResult:
             "errors": {
                 "all_levels": [[m, lv, f, e] for (m, lv, f), e in self.errors_all.items()],
                 "level1": [[m, lv, f, e] for (m, lv, f), e in self.errors_level1.items()],
+                # Table 1's ± (same rows; null where undefined: one period, a diverged PNLSS).
+                "all_levels_std": _spread_rows(self.spreads_all),
+                "level1_std": _spread_rows(self.spreads_level1),
                 "held_out_levels": self.held_out_errors,
             },
             "table1": {
@@ -156,6 +170,11 @@ class IdentificationResult:
                 "workers": self.scan.workers,
             },
         }
+
+
+def _spread_rows(spreads: dict[tuple[str, str, float], float]) -> list[list[Any]]:
+    """[[model, level, freq_hz, spread or None], ...]: NaN (undefined) as null in JSON."""
+    return [[m, lv, f, s if math.isfinite(s) else None] for (m, lv, f), s in spreads.items()]
 
 
 def config_dict(config: IdentificationConfig) -> dict[str, Any]:

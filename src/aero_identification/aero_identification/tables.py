@@ -25,6 +25,7 @@ def table1(
     freqs: Sequence[float],
     models: Sequence[str] = TABLE1_MODELS,
     digits: int = 2,
+    spreads: Mapping[tuple[str, str, float], float] | None = None,
 ) -> tuple[str, str]:
     """The paper's Table 1: relative RMS errors, rows = models, columns = levels × frequencies.
 
@@ -35,26 +36,44 @@ def table1(
         freqs: sine frequencies [Hz] in column order within each level, e.g. [0.4, 1.0, 1.6].
         models: row order.
         digits: decimals in the Markdown table (the CSV keeps full precision).
+        spreads: {(model, level, freq_hz): spread} with the same keys as ``errors``: the
+            standard deviation over the sine's periods of the per-period error
+            (metrics.relative_rms_error_spread). A finite spread is shown as
+            "error ± spread" in Markdown; a missing or NaN one leaves the cell as it is.
 
     Returns:
         (markdown, csv_text). Columns: "model", then "<level> <freq> Hz" for each level, and
-        each frequency within it.
+        each frequency within it. With ``spreads`` (even empty) the CSV follows each value
+        column with "<column> std", the spread (full precision, empty when missing or NaN);
+        the value columns are the same with or without spreads, and without ``spreads`` the
+        table is exactly the one without spread columns.
 
     Raises:
-        ValueError: for a key whose model, level or frequency is not in the layout (a typo
-            would otherwise drop a result silently).
+        ValueError: for a key of ``errors`` or ``spreads`` whose model, level or frequency is
+            not in the layout (a typo would otherwise drop a result silently).
     """
     freqs_arr = np.asarray(freqs, dtype=float)
-    cells: dict[tuple[str, str, int], float] = {}
-    for (model, level, freq), value in errors.items():
-        match = np.flatnonzero(np.isclose(freqs_arr, float(freq), rtol=1e-9, atol=1e-12))
-        if model not in models or level not in levels or match.size != 1:
-            raise ValueError(
-                f"result key {(model, level, freq)} is not in the table layout (models "
-                f"{list(models)}, levels {list(levels)}, freqs {list(freqs)})"
-            )
-        cells[(model, level, int(match[0]))] = float(value)
-    header = ["model"] + [_column_name(lv, f) for lv in levels for f in freqs_arr]
+
+    def place(values: Mapping[tuple[str, str, float], float]) -> dict[tuple[str, str, int], float]:
+        cells: dict[tuple[str, str, int], float] = {}
+        for (model, level, freq), value in values.items():
+            match = np.flatnonzero(np.isclose(freqs_arr, float(freq), rtol=1e-9, atol=1e-12))
+            if model not in models or level not in levels or match.size != 1:
+                raise ValueError(
+                    f"result key {(model, level, freq)} is not in the table layout (models "
+                    f"{list(models)}, levels {list(levels)}, freqs {list(freqs)})"
+                )
+            cells[(model, level, int(match[0]))] = float(value)
+        return cells
+
+    cells = place(errors)
+    spread_cells = {k: v for k, v in place(spreads or {}).items() if np.isfinite(v)}
+    columns = [_column_name(lv, f) for lv in levels for f in freqs_arr]
+    header = ["model", *columns]
+    with_std = spreads is not None
+    header_csv = ["model"] + [
+        name for c in columns for name in ((c, f"{c} std") if with_std else (c,))
+    ]
     rows_md: list[list[str]] = []
     rows_csv: list[list[str]] = []
     for model in models:
@@ -62,8 +81,14 @@ def table1(
         for level in levels:
             for i in range(freqs_arr.size):
                 cell = cells.get((model, level, i))
-                md.append("–" if cell is None else f"{cell:.{digits}f}")
+                spread = spread_cells.get((model, level, i))
+                text = "–" if cell is None else f"{cell:.{digits}f}"
+                if cell is not None and spread is not None:
+                    text += f" ± {spread:.{digits}f}"
+                md.append(text)
                 cs.append("" if cell is None else repr(cell))
+                if with_std:
+                    cs.append("" if spread is None else repr(spread))
         rows_md.append(md)
         rows_csv.append(cs)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -71,7 +96,7 @@ def table1(
     markdown = "\n".join(lines) + "\n"
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(header)
+    writer.writerow(header_csv)
     writer.writerows(rows_csv)
     return markdown, buffer.getvalue()
 

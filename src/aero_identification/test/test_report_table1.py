@@ -1,14 +1,26 @@
-"""Reports: Table 1 layout (Markdown, CSV) and the figures as non-empty PNGs."""
+"""Reports: Table 1 layout (Markdown, CSV), its ± (the spread over the sine's periods) from the
+metric through the pipeline to the tables and models.json, and the figures as non-empty PNGs."""
 
 import csv
+import dataclasses
 import io
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from aero_identification import BLA, PeriodicData, estimate_bla
+from aero_identification import (
+    BLA,
+    IdentificationConfig,
+    IdentificationResult,
+    PeriodicData,
+    SineData,
+    estimate_bla,
+    relative_rms_error,
+    relative_rms_error_spread,
+)
 from aero_identification.data import random_phase_period
+from aero_identification.dataset import LevelRecord
 from aero_identification.report import (
     plot_cl_alpha,
     plot_clusters,
@@ -17,6 +29,7 @@ from aero_identification.report import (
     plot_time_series,
     table1,
 )
+from aero_identification.results import LevelResult
 
 LEVELS = ["low", "medium", "high"]
 FREQS = [0.4, 1.0, 1.6]
@@ -63,6 +76,138 @@ def test_table1_rejects_keys_outside_the_layout() -> None:
         table1({("PNLSS", "low", 0.5): 0.1}, LEVELS, FREQS)
     with pytest.raises(ValueError, match="not in the table layout"):
         table1({("ARX", "low", 0.4): 0.1}, LEVELS, FREQS)
+
+
+# --- the spread (±) of Table 1's cells -----------------------------------------------------------
+
+
+def test_spread_is_the_std_of_the_per_period_errors() -> None:
+    base = np.array([1.0, -1.0, 1.0, -1.0])  # one period: mean 0, rms deviation 1
+    # Period 0: error 0.1; period 1: error 0.3 (each period against its own deviation).
+    y = np.concatenate([base, base])
+    y_hat = np.concatenate([base + 0.1, base + 0.3])
+    assert relative_rms_error_spread(y, y_hat, 4) == pytest.approx(0.2 / np.sqrt(2), rel=1e-12)
+    # A third period at another offset and scale: deviation rms 2, error 1.2 / 2 = 0.6. Each
+    # period is centred on its own mean: errors 0.1, 0.3, 0.6, sample std (ddof = 1).
+    y3 = np.concatenate([y, 5.0 + 2.0 * base])
+    y3_hat = np.concatenate([y_hat, 5.0 + 2.0 * base + 1.2])
+    assert relative_rms_error_spread(y3, y3_hat, 4) == pytest.approx(
+        np.std([0.1, 0.3, 0.6], ddof=1), rel=1e-12
+    )
+    assert relative_rms_error_spread(y3, y3_hat, 4) == pytest.approx(np.sqrt(0.19 / 3), rel=1e-12)
+    # Equal per-period errors: no spread, whatever the overall error.
+    assert relative_rms_error_spread(y, y + 0.2, 4) == pytest.approx(0.0, abs=1e-15)
+    # One period: undefined.
+    assert np.isnan(relative_rms_error_spread(base, base + 0.1, 4))
+    with pytest.raises(ValueError, match="whole periods"):
+        relative_rms_error_spread(y[:6], y_hat[:6], 4)
+    with pytest.raises(ValueError, match="same shape"):
+        relative_rms_error_spread(y, y_hat[:4], 4)
+    with pytest.raises(ValueError, match="positive integer"):
+        relative_rms_error_spread(y, y_hat, 0)
+
+
+def test_table1_with_spreads_markdown_and_csv() -> None:
+    errors = paper_errors()
+    del errors[("PNLSS", "high", 1.6)]
+    spreads = {
+        ("BLA FRF", "low", 0.4): 0.0123,  # shown with the value's digits
+        ("BLA SS", "medium", 1.0): 0.05,
+        ("PNLSS", "low", 1.0): float("nan"),  # a single period: no ±
+    }
+    markdown, csv_text = table1(errors, LEVELS, FREQS, spreads=spreads)
+    plain_md, plain_csv = table1(errors, LEVELS, FREQS)
+    md_lines = markdown.strip().splitlines()
+    assert md_lines[:2] == plain_md.strip().splitlines()[:2]  # same header
+    assert md_lines[2] == (
+        "| BLA FRF | 0.52 ± 0.01 | 0.14 | 0.12 | 1.68 | 0.59 | 0.55 | 2.36 | 0.99 | 0.80 |"
+    )
+    assert "| 0.68 ± 0.05 |" in md_lines[3]
+    assert md_lines[4] == plain_md.strip().splitlines()[4]  # NaN spread: cells unchanged
+    assert "±" not in plain_md and markdown.count("±") == 2
+    assert table1(errors, LEVELS, FREQS, digits=3, spreads=spreads)[0].count("0.520 ± 0.012") == 1
+
+    rows = list(csv.reader(io.StringIO(csv_text)))
+    columns = [f"{lv} {f:g} Hz" for lv in LEVELS for f in FREQS]
+    assert rows[0] == ["model"] + [c for col in columns for c in (col, f"{col} std")]
+    table = {r[0]: dict(zip(rows[0], r, strict=True)) for r in rows[1:]}
+    assert float(table["BLA FRF"]["low 0.4 Hz std"]) == 0.0123
+    assert float(table["BLA SS"]["medium 1 Hz std"]) == 0.05
+    assert table["PNLSS"]["low 1 Hz std"] == ""  # NaN: empty
+    assert table["BLA FRF"]["low 1 Hz std"] == ""  # no spread given
+    assert table["PNLSS"]["high 1.6 Hz"] == table["PNLSS"]["high 1.6 Hz std"] == ""
+    # Every value column is the one of the table without spreads.
+    plain = list(csv.DictReader(io.StringIO(plain_csv)))
+    assert list(plain[0]) == ["model", *columns]  # no spreads: no std columns
+    for row in plain:
+        assert all(table[row["model"]][k] == v for k, v in row.items())
+
+
+def test_table1_rejects_spread_keys_outside_the_layout() -> None:
+    with pytest.raises(ValueError, match="not in the table layout"):
+        table1(paper_errors(), LEVELS, FREQS, spreads={("PNLSS", "low", 0.5): 0.01})
+    with pytest.raises(ValueError, match="not in the table layout"):
+        table1(paper_errors(), LEVELS, FREQS, spreads={("PNLSS", "extreme", 0.4): 0.01})
+
+
+class _Gain:
+    """A stand-in model: ŷ = gain · u + bias (what validation and payload need)."""
+
+    def __init__(self, gain: float, bias: float = 0.0) -> None:
+        self.gain, self.bias = gain, bias
+
+    def simulate(self, u: np.ndarray) -> np.ndarray:
+        return self.gain * np.asarray(u) + self.bias
+
+    def to_dict(self) -> dict[str, float]:
+        return {"gain": self.gain, "bias": self.bias}
+
+
+def test_validation_fills_spreads_beside_errors_into_tables_and_json() -> None:
+    from aero_identification.pipeline import _validate_sine
+
+    n, periods = 50, 4
+    t = np.arange(n * periods)
+    u = 10.0 + 4.0 * np.sin(2 * np.pi * t / n)
+    # The measured output: a gain whose deviation from the model's differs period by period.
+    scale = np.repeat([1.0, 1.1, 0.95, 1.2], n)
+    y = 0.1 * (u - 10.0) * scale + 1.0
+    sine = SineData("sine 1 Hz at 10°", 1.0, 10.0, n, u, y)
+    config = IdentificationConfig()
+    result = IdentificationResult(config=config, fs=float(n), sines_planned=True)
+    result.levels["low"] = LevelResult(LevelRecord("low", None, key="1", offset_deg=10.0))
+    result.pnlss_all = _Gain(0.1, 0.0)
+    result.pnlss_level1 = _Gain(np.inf)  # diverged
+    _validate_sine(sine, result)
+    y_hat = 0.1 * u
+    key = ("PNLSS", "low", 1.0)
+    assert result.errors_all[key] == relative_rms_error(y, y_hat)  # the value is unchanged
+    per_period = [
+        relative_rms_error(y[p * n : (p + 1) * n], y_hat[p * n : (p + 1) * n])
+        for p in range(periods)
+    ]
+    assert result.spreads_all[key] == pytest.approx(np.std(per_period, ddof=1), rel=1e-12)
+    assert result.spreads_all[key] > 0.01
+    assert result.errors_level1[key] == np.inf and np.isnan(result.spreads_level1[key])
+    assert set(result.spreads_all) == set(result.errors_all)
+
+    tables = result.tables()
+    md, csv_text = tables["table1_all_levels"]
+    error, spread = result.errors_all[key], result.spreads_all[key]
+    assert f"| PNLSS | {error:.2f} ± {spread:.2f} |" in md
+    row = next(r for r in csv.DictReader(io.StringIO(csv_text)) if r["model"] == "PNLSS")
+    assert float(row["low 1 Hz"]) == error and float(row["low 1 Hz std"]) == spread
+    assert "±" not in tables["table1_level1"][0]  # inf with NaN spread: no ±
+    payload = result.to_json_dict()
+    assert payload["errors"]["all_levels"] == [["PNLSS", "low", 1.0, error]]
+    assert payload["errors"]["all_levels_std"] == [["PNLSS", "low", 1.0, spread]]
+    assert payload["errors"]["level1_std"] == [["PNLSS", "low", 1.0, None]]
+    assert f"{error:.2f} ± {spread:.2f}" in payload["table1"]["markdown"]
+    # The variant without clustering carries its own spreads.
+    result.no_clustering = dataclasses.replace(
+        result, spreads_all={key: 0.5}, errors_all={key: 0.25}
+    )
+    assert "| PNLSS | 0.25 ± 0.50 |" in result.tables()["table1_no_clustering"][0]
 
 
 def small_bla() -> tuple[PeriodicData, BLA]:
