@@ -6,7 +6,9 @@ are described in models.py (PNLSSModel).
 
 Fit (Paduart 2010; the PNLSS toolbox's weighted Levenberg–Marquardt):
 
-- start from the linear model (E = F = 0);
+- start from the linear model (E = F = 0) in a canonical real modal basis (`modal_basis`), so
+  that the start, and with it the fit, depends on the linear model's transfer function and not
+  on the state basis its subspace fit happened to return (issue 22: BLAS rounding moved it);
 - each of the P·M periods is an independent periodic record; its transient is removed by
   prepending the last n_transient input samples of the same record (steady state of a periodic
   input), whose outputs are simulated but not part of the cost;
@@ -196,6 +198,56 @@ def periodic_records(u: np.ndarray, n_transient: int) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate([per[:, tail], per], axis=1)[:, :, None])
 
 
+def modal_basis(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C) in a canonical real modal basis: one that depends on the transfer function only.
+
+    A subspace fit returns its states in the basis of an SVD, which rounding moves: two
+    OpenBLAS kernels gave the same poles to 1e-6 but A entries differing by 1e-2 (issue 22).
+    The PNLSS monomials and the LM's column scaling live in that basis, so a basis that rounding
+    moves is a start that rounding moves. Here the basis is fixed by the system itself: real
+    modal (block-diagonal) form (e.g. Ljung 1999, §4.3's diagonal forms), modes sorted by
+    frequency then by pole radius, each 2×2 block rotated (a rotation commutes with it) so
+    that its B entries are (1, 0), each real mode scaled so that its B entry is 1 (a mode the
+    input does not reach keeps its eigenvector's scale).
+    Defective or near-repeated poles (an ill-conditioned eigenbasis) keep the given basis.
+    """
+    nx = A.shape[0]
+    if nx == 0:
+        return A.copy(), B.copy(), C.copy()
+    lam, V = np.linalg.eig(A)
+    keep = np.flatnonzero(lam.imag >= -1e-12 * np.maximum(1.0, np.abs(lam)))
+    keep = keep[np.lexsort((-np.abs(lam[keep]), np.abs(np.angle(lam[keep]))))]
+    cols: list[np.ndarray] = []
+    blocks: list[int] = []
+    for i in keep:
+        if abs(lam[i].imag) <= 1e-12 * max(1.0, abs(lam[i])):
+            cols.append(V[:, i].real)
+            blocks.append(1)
+        else:
+            cols += [V[:, i].real, V[:, i].imag]
+            blocks.append(2)
+    if len(cols) != nx:
+        return A.copy(), B.copy(), C.copy()
+    T = np.column_stack(cols)
+    if not np.all(np.isfinite(T)) or np.linalg.cond(T) > 1e8:
+        return A.copy(), B.copy(), C.copy()
+    j = 0
+    for size in blocks:
+        b = np.linalg.solve(T, B)[j : j + size, 0]
+        r = float(np.hypot(*b)) if size == 2 else abs(float(b[0]))
+        if size == 1 and r > 0:
+            T[:, j] *= b[0]
+        elif size == 2 and r > 0:
+            phi = math.atan2(b[1], b[0])
+            rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
+            T[:, j : j + 2] = T[:, j : j + 2] @ rot * r
+        j += size
+    Am = np.linalg.solve(T, A @ T)
+    return Am, np.linalg.solve(T, B), C @ T
+
+
 def _initial_from_linear(
     lin: LinearStateSpace,
     u_rec: np.ndarray,
@@ -210,9 +262,9 @@ def _initial_from_linear(
             "the initial linear model is unstable; fit it with fit_linear_ss (stable by "
             "construction) or stabilise it first"
         )
-    A = lin.A.copy()
-    B = lin.B * u_scale[None, :]
-    C = lin.C / y_scale[:, None]
+    A, B, C = modal_basis(lin.A, lin.B, lin.C)
+    B = B * u_scale[None, :]
+    C = C / y_scale[:, None]
     D = lin.D * u_scale[None, :] / y_scale[:, None]
     nx = A.shape[0]
     x = linear_states(A, B, u_rec)  # their RMS on the training records

@@ -342,7 +342,9 @@ def _workers_without_main_script() -> Iterator[None]:
     interactive session or a notebook.
     """
     main = sys.modules.get("__main__")
-    saved = {k: main.__dict__[k] for k in ("__file__", "__spec__") if main and k in main.__dict__}
+    saved: dict[str, Any] = {
+        k: main.__dict__[k] for k in ("__file__", "__spec__") if main and k in main.__dict__
+    }
     if main is None or (saved.get("__file__") is None and saved.get("__spec__") is None):
         yield
         return
@@ -351,7 +353,8 @@ def _workers_without_main_script() -> Iterator[None]:
     try:
         yield
     finally:
-        main.__dict__.update(saved)
+        for key, value in saved.items():
+            setattr(main, key, value)
 
 
 def _on_client(

@@ -163,13 +163,14 @@ def _check_history(model: PNLSSModel) -> None:
 
 def test_diverging_steps_from_a_bad_start_are_rejected(duffing_case):
     c = duffing_case
-    # Bad start: the linear model plus the largest cubic state term (a softening spring) that
-    # still keeps the training simulation finite.
+    # Bad start: the linear model (canonical modal basis, pnlss.modal_basis) plus the largest
+    # softening cubic term x₁³ in the first state equation that keeps the training simulation
+    # finite.
     start = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=0)
     cubic = int(np.flatnonzero((start.exponents_state == [3, 0, 0]).all(axis=1))[0])
     for size in (0.3, 0.2, 0.1, 0.05, 0.03):
         E = start.E.copy()
-        E[:, cubic] = -size * np.sign(start.A[:, 0])
+        E[0, cubic] = -size
         bad = dataclasses.replace(start, E=E)
         try:
             fit_pnlss(c.data, c.lin, max_iter=0, initial_model=bad)
@@ -302,3 +303,27 @@ def test_a_record_with_zero_weight_does_not_move_the_fit(duffing_case):
         fit_pnlss(corrupted, c.lin, max_iter=1, record_weights=np.ones(3))
     with pytest.raises(ValueError, match="unknown equations"):
         fit_pnlss(corrupted, c.lin, max_iter=1, equations="output")
+
+
+def test_the_start_does_not_depend_on_the_linear_models_state_basis(duffing_case):
+    """Issue 22: two BLAS kernels gave the subspace model in different state bases (same poles
+    to 1e-6, A entries 1e-2 apart), and the LM went to different minima (F-16: 10 % apart).
+    The start is now taken in a canonical modal basis: any similarity transform of the linear
+    model gives the same start and the same fit."""
+    from aero_identification.pnlss import modal_basis
+
+    c = duffing_case
+    T = np.array([[0.7, -1.3], [0.4, 2.1]])
+    A2 = np.linalg.solve(T, c.lin.A @ T)
+    moved = dataclasses.replace(c.lin, A=A2, B=np.linalg.solve(T, c.lin.B), C=c.lin.C @ T)
+    for a, b in zip(modal_basis(c.lin.A, c.lin.B, c.lin.C), modal_basis(moved.A, moved.B, moved.C),
+                    strict=True):  # fmt: skip
+        np.testing.assert_allclose(a, b, atol=1e-10)
+    Am, Bm, _ = modal_basis(c.lin.A, c.lin.B, c.lin.C)
+    assert Am[0, 0] == pytest.approx(Am[1, 1]) and Bm[1, 0] == pytest.approx(0.0, abs=1e-12)
+    fits = [
+        fit_pnlss(c.data, lin, degrees=(2, 3), max_iter=8, validation=(c.u_val, c.y_val))
+        for lin in (c.lin, moved)
+    ]
+    y = [m.simulate(c.u_val) for m in fits]
+    np.testing.assert_allclose(y[0], y[1], rtol=1e-7, atol=1e-9 * np.std(y[0]))
