@@ -327,3 +327,32 @@ def test_the_start_does_not_depend_on_the_linear_models_state_basis(duffing_case
     ]
     y = [m.simulate(c.u_val) for m in fits]
     np.testing.assert_allclose(y[0], y[1], rtol=1e-7, atol=1e-9 * np.std(y[0]))
+
+
+def test_stress_rejects_iterates_and_models_that_diverge_at_a_larger_amplitude(duffing_case):
+    """Issue 22: a model must stay bounded (and periodic) on the held-out input scaled up."""
+    from aero_identification.scan import periodic_at
+
+    c = duffing_case
+    start = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=0)
+    cubic = int(np.flatnonzero((start.exponents_state == [3, 0, 0]).all(axis=1))[0])
+    E = start.E.copy()
+    E[0, cubic] = 1e-3  # x₁(t+1) grows with x₁³: finite on the data, diverges at 1.5×
+    grows = dataclasses.replace(start, E=E)
+    fit_pnlss(c.data, c.lin, max_iter=0, initial_model=grows)  # finite on the training data
+    assert periodic_at(start, c.data, 3.0)  # the linear start is stable at any amplitude
+    assert periodic_at(grows, c.data, 1.0) and not periodic_at(grows, c.data, 1.5)
+    # With stress 1.5 an iterate that diverges there counts as diverging: the start above is
+    # flagged, and no accepted iterate is.
+    val = PeriodicData(c.data.u[:, :1, :1], c.data.y[:, :1, :1], c.data.fs, c.data.excited_lines)
+    flagged = fit_pnlss(c.data, c.lin, max_iter=3, validation=val, initial_model=grows,
+                        stress=1.5)  # fmt: skip
+    assert math.isinf(flagged.history_[0].cost_val)
+    plain = fit_pnlss(c.data, c.lin, max_iter=0, validation=val, initial_model=grows)
+    assert math.isfinite(plain.history_[0].cost_val)  # without stress it passes
+    model = fit_pnlss(c.data, c.lin, (2, 3), max_iter=15, validation=val, stress=1.5)
+    accepted = [r for r in model.history_[1:] if r.accepted]
+    assert accepted and all(math.isfinite(r.cost_val) for r in accepted)
+    assert periodic_at(model, c.data, 1.5)
+    with pytest.raises(ValueError, match="stress needs validation"):
+        fit_pnlss(c.data, c.lin, max_iter=1, stress=1.5)
