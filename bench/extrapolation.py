@@ -73,7 +73,8 @@ def main() -> None:
           f"{100 * (ratio - 1):.1f} % above ({'within' if ratio <= 1.10 else 'OVER'} the 10 % "
           f"target); identification {seconds:.1f} s")  # fmt: skip
     print(json.dumps({
-        "stress_scale": args.stress, "kept_level7": kept, "best_level7": best, "ratio": ratio, "seconds": seconds,
+        "stress_scale": args.stress, "kept_level7": kept, "best_level7": best, "ratio": ratio,
+        "seconds": seconds,
         "rows": [{**r.as_dict(), "level7": e} for r, e in zip(scan.rows, test, strict=True)],
     }))  # fmt: skip
 
