@@ -377,7 +377,6 @@ def _fit(
             data, lin, degrees=config.degrees, structure=config.structure,
             max_iter=config.max_iter, validation=validation, initial_model=start,
             record_weights=weights, validation_weights=val_weights,
-            stress=(config.stress_scale or None) if validation is not None else None,
         )  # fmt: skip
     except (ValueError, np.linalg.LinAlgError) as exc:
         result.warnings.append(f"PNLSS ({label}) failed: {exc}")
@@ -464,7 +463,7 @@ def _scan(
             record_weights=_level_weights(data, config.level_weighting),
             validation_weights=_level_weights(validation, config.level_weighting),
             starts=("linear", "output_ls"),  # the latter: the single-structure fit's start
-            stress=config.stress_scale or None,
+            stress=config.scan_stress or None,
         )
         say(f"PNLSS structure scan: {len(scan.rows)} fits, {time.perf_counter() - t0:.1f} s")
         return scan

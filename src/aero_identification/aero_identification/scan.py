@@ -52,7 +52,7 @@ from .data import PeriodicData
 from .metrics import steady_state_response
 from .models import LinearStateSpace, PNLSSModel
 from .monomials import STRUCTURES, check_degrees
-from .pnlss import EQUATIONS, fit_pnlss, output_equation_start
+from .pnlss import EQUATIONS, fit_pnlss, output_equation_start, stress_periods
 
 __all__ = ["Candidate", "ScanResult", "ScanRow", "candidate_grid", "scan_pnlss"]
 
@@ -194,7 +194,7 @@ def scan_pnlss(
     record_weights: np.ndarray | None = None,
     validation_weights: np.ndarray | None = None,
     starts: Iterable[str] = ("linear",),
-    stress: float | None = None,
+    stress: float | None = 1.5,
 ) -> ScanResult:
     """Fit every candidate PNLSS structure and select one by cross-validation (module docs).
 
@@ -454,7 +454,8 @@ def _n_params(model: PNLSSModel) -> int:
 
 def periodic_at(model: PNLSSModel, data: PeriodicData, scale: float) -> bool:
     """Whether the model reaches a bounded periodic steady state on each realization's input
-    scaled about its mean by `scale`.
+    scaled about its mean by `scale`, and on two random-phase periods of the same amplitude
+    spectrum per realization (pnlss.stress_periods, the inputs fit_pnlss(stress=) checks).
 
     A stable system driven by a periodic input settles to a periodic response (the premise of
     the BLA framework, Pintelon & Schoukens 2012 §3.4); a model that diverges, or whose last
@@ -463,9 +464,7 @@ def periodic_at(model: PNLSSModel, data: PeriodicData, scale: float) -> bool:
     regime) and would not extrapolate there.
     """
     N = data.u.shape[0]
-    for m in range(data.M):
-        u = data.u[:, :, m].mean(axis=1)
-        u = u.mean() + scale * (u - u.mean())
+    for u in stress_periods(data.u.mean(axis=1), scale).T:
         y = np.asarray(model.simulate(np.tile(u, 22)))
         if not np.all(np.isfinite(y)):
             return False
