@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-ENVIRONMENTS = {
+ENVIRONMENTS: dict[str, dict[str, str | None]] = {
     "machine": {},
     "generic": {"OPENBLAS_CORETYPE": None, "OPENBLAS_L2_SIZE": None},
     "threads1": {"NUMBA_NUM_THREADS": "1"},
