@@ -35,8 +35,8 @@ def main() -> None:
     import argparse
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--stress", type=float, default=1.5,
-                        help="config.scan_stress (default 1.5; 0: off)")  # fmt: skip
+    parser.add_argument("--stress", type=float, default=1.3,
+                        help="config.scan_stress (default 1.3; 0: off)")  # fmt: skip
     args = parser.parse_args()
     directory = os.environ.get("F16_GVT_DIR", str(HERE.parent.parent / "shared/data/f16-gvt"))
     patterns = [f"*Level{k}.csv" for k in (1, 3, 5, 7)]

@@ -365,7 +365,7 @@ def fit_pnlss(
         validation_weights: the same for the PeriodicData validation records (R_val = P·M of
             `validation`), so the returned iterate is chosen by the same criterion.
         stress: with validation, also simulate the validation inputs scaled about their mean by
-            this factor (e.g. 1.5), and for periodic validation data two random-phase periods of
+            this factor (e.g. 1.3), and for periodic validation data two random-phase periods of
             the same amplitude spectrum per record (`stress_periods`): a trial step whose
             stressed simulation diverges (leaves the state bound) is rejected like one that
             diverges on the data, so the returned model stays bounded beyond the validated

@@ -194,7 +194,7 @@ def scan_pnlss(
     record_weights: np.ndarray | None = None,
     validation_weights: np.ndarray | None = None,
     starts: Iterable[str] = ("linear",),
-    stress: float | None = 1.5,
+    stress: float | None = 1.3,
 ) -> ScanResult:
     """Fit every candidate PNLSS structure and select one by cross-validation (module docs).
 
