@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 from aero_identification.config import IdentificationConfig
-from aero_identification.pipeline import _record_error, identify
+from aero_identification.pipeline import identify, record_error
 from aero_identification.records import read_records, records_dataset
 
 HERE = Path(__file__).resolve().parent
@@ -56,7 +56,7 @@ def main() -> None:
         raise SystemExit(f"no structure scan ran: {result.warnings}")
     level7 = result.levels["7"].record.data
     assert level7 is not None
-    test = [math.nan if m is None else _record_error(m, level7, centred=False) for m in scan.models]
+    test = [math.nan if m is None else record_error(m, level7, centred=False) for m in scan.models]
     finite = [e for e in test if math.isfinite(e)]
     best = min(finite) if finite else math.inf
     kept = test[scan.best_index]

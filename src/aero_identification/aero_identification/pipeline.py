@@ -582,7 +582,7 @@ def _validate_sine(rec: SineData, result: IdentificationResult) -> None:
     )
 
 
-def _record_error(model: Any, data: PeriodicData, centred: bool) -> float:
+def record_error(model: Any, data: PeriodicData, centred: bool) -> float:
     """Relative RMS error over every realization's periods (steady-state simulation). Linear
     models map deviations: with ``centred`` they are put at the record's means."""
     num, den = 0.0, 0.0
@@ -617,11 +617,11 @@ def _held_out_errors(result: IdentificationResult) -> list[dict[str, Any]]:
                 "level": lv.name,
                 "input_rms": lv.record.input_rms,
                 "nearest_estimation_level": nearest.name,
-                "linear_nearest": _record_error(nearest.linear, data, centred=True),
-                "linear_lowest": _record_error(estimation[0].linear, data, centred=True),
+                "linear_nearest": record_error(nearest.linear, data, centred=True),
+                "linear_lowest": record_error(estimation[0].linear, data, centred=True),
                 "pnlss": None
                 if result.pnlss_all is None
-                else _record_error(result.pnlss_all, data, centred=False),
+                else record_error(result.pnlss_all, data, centred=False),
             }
         )
     return rows

@@ -259,16 +259,16 @@ def modal_basis(
     T = np.column_stack(cols)
     if not np.all(np.isfinite(T)) or np.linalg.cond(T) > 1e8:
         return A.copy(), B.copy(), C.copy()
+    # A block's columns times S change only that block's B entries, to S⁻¹b: S = b for a real
+    # mode, and S = [[b₀, −b₁], [b₁, b₀]] (rotation by atan2(b₁, b₀) times |b|, which commutes
+    # with the block) for a pair, so every block's B becomes 1 or (1, 0).
+    b_modal = np.linalg.solve(T, B)[:, 0]
     j = 0
     for size in blocks:
-        b = np.linalg.solve(T, B)[j : j + size, 0]
-        r = float(np.hypot(*b)) if size == 2 else abs(float(b[0]))
-        if size == 1 and r > 0:
-            T[:, j] *= b[0]
-        elif size == 2 and r > 0:
-            phi = math.atan2(b[1], b[0])
-            rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
-            T[:, j : j + 2] = T[:, j : j + 2] @ rot * r
+        b = b_modal[j : j + size]
+        if np.any(b != 0):
+            S = np.array([[b[0]]]) if size == 1 else np.array([[b[0], -b[1]], [b[1], b[0]]])
+            T[:, j : j + size] = T[:, j : j + size] @ S
         j += size
     Am = np.linalg.solve(T, A @ T)
     return Am, np.linalg.solve(T, B), C @ T

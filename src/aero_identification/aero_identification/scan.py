@@ -348,19 +348,19 @@ def _workers_without_main_script() -> Iterator[None]:
     interactive session or a notebook.
     """
     main = sys.modules.get("__main__")
-    saved: dict[str, Any] = {
-        k: main.__dict__[k] for k in ("__file__", "__spec__") if main and k in main.__dict__
-    }
-    if main is None or (saved.get("__file__") is None and saved.get("__spec__") is None):
+    path, spec = getattr(main, "__file__", None), getattr(main, "__spec__", None)
+    if main is None or (path is None and spec is None):
         yield
         return
-    main.__dict__.pop("__file__", None)
+    if path is not None:
+        del main.__file__
     main.__spec__ = None
     try:
         yield
     finally:
-        for key, value in saved.items():
-            setattr(main, key, value)
+        if path is not None:
+            main.__file__ = path
+        main.__spec__ = spec
 
 
 def _on_client(
