@@ -116,6 +116,9 @@ class SineRecord:
         return f"sine {self.frequency_hz:g} Hz at {self.offset_deg:g}°"
 
 
+MAX_BEYOND = 100_000  # samples past the plan's end kept for a revision (CampaignAssembler)
+
+
 @dataclass
 class _Slot:
     """Where plan sample k goes: a period block column or a sine record offset."""
@@ -138,13 +141,18 @@ class CampaignAssembler:
     outside: int = 0  # samples not in any measured period (ramps, settling, baseline)
     # id -> (first k, last k or None while open, description): rig_runtime.anomaly records
     anomalies: dict[str, tuple[int, int | None, str]] = field(default_factory=dict)
+    # An adaptive run's decision and refused events (/experiment/segment), as they came.
+    decisions: list[dict[str, Any]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.fs = float(self.plan.fs)
         self.period_ns = 1e9 / self.fs
-        self.total = int(self.plan.total_samples)
+        # The plan as first received (revision 0 in a run from the start): an adaptive run's
+        # revisions (multisine_gen.revision) are measured against it.
+        self.planned = self.plan
         # How often each plan sample arrived, per channel (saturating at 255), and how many
         # samples fell outside the plan (before t0 or after its last sample).
+        self.total = int(self.plan.total_samples)
         self.coverage = {c: np.zeros(self.total, dtype=np.uint8) for c in ("u", "y")}
         self.outside_plan = {"u": 0, "y": 0}
         # The value each plan sample arrived with: the same sample delivered again (identical
@@ -152,19 +160,28 @@ class CampaignAssembler:
         # stamp is a duplicate (a conflict: the period is excluded).
         self.values = {c: np.full(self.total, np.nan) for c in ("u", "y")}
         self.redelivered = {"u": 0, "y": 0}
+        # Samples past the plan's end, kept until a revision that lengthens the plan claims
+        # them (an adaptive run's plan message may come after its first new samples).
+        self.beyond: dict[str, dict[int, float]] = {"u": {}, "y": {}}
+        self._cut()
+
+    def _cut(self) -> None:
+        """Slots and empty period blocks / sine records of the plan's measured segments."""
+        self.blocks.clear()
+        self.sines.clear()
         self._slots: list[_Slot] = []
-        periods = {lv.level: lv.periods for lv in self.plan.levels}
         for seg in self.plan.segments:
             if seg.kind == "multisine" and seg.period is not None:
                 assert seg.level is not None and seg.realization is not None
                 key = (seg.level, seg.realization)
                 if key not in self.blocks:
+                    level = next(lv for lv in self.plan.levels if lv.level == seg.level)
                     self.blocks[key] = PeriodBlock.empty(
                         key[0],
                         key[1],
                         float(seg.offset_deg or 0.0),
                         int(seg.samples_per_period or 0),
-                        periods[key[0]],
+                        level.periods_of(seg.realization),
                     )
                 self._slots.append(_Slot("multisine", key, seg.start_k, seg.length, seg.period))
             elif seg.kind == "sine":
@@ -186,6 +203,44 @@ class CampaignAssembler:
                 self._slots.append(_Slot("sine", idx, seg.start_k, n, 0))
         self._slots.sort(key=lambda s: s.start_k)
         self._starts = np.array([s.start_k for s in self._slots], dtype=np.int64)
+
+    def revise(self, plan: ExperimentPlan) -> None:
+        """Follow a revision of the plan (an adaptive run, multisine_gen.revision): cut the
+        samples held so far into the revised plan's periods. The samples are kept per plan
+        index, so nothing is lost and a conflict stays a conflict. ValueError when ``plan``
+        is older than the one held, or differs in a sample already received."""
+        if plan.revision <= self.plan.revision:
+            raise ValueError(
+                f"plan revision {plan.revision} is not newer than revision {self.plan.revision}"
+            )
+        received = np.flatnonzero(self.coverage["u"] | self.coverage["y"])
+        last = int(received[-1]) + 1 if received.size else 0
+        old, new = self.plan.command_deg(), plan.command_deg()
+        if last > len(new) or not np.array_equal(old[:last], new[:last]):
+            raise ValueError(
+                f"plan revision {plan.revision} changes samples already received (up to {last})"
+            )
+        marks = dict(self.anomalies)
+        self.plan = plan
+        self.total = int(plan.total_samples)
+        for channel in ("u", "y"):
+            n = min(self.total, len(self.coverage[channel]))
+            coverage = np.zeros(self.total, dtype=np.uint8)
+            values = np.full(self.total, np.nan)
+            coverage[:n], values[:n] = self.coverage[channel][:n], self.values[channel][:n]
+            self.coverage[channel], self.values[channel] = coverage, values
+        self._cut()
+        self.outside = 0
+        for channel in ("u", "y"):
+            for k in np.flatnonzero(self.coverage[channel]):
+                for _ in range(int(self.coverage[channel][k])):
+                    self._store(channel, int(k), float(self.values[channel][k]))
+            waiting, self.beyond[channel] = self.beyond[channel], {}
+            for k, value in sorted(waiting.items()):
+                self.outside_plan[channel] -= 1  # counted again by add() if still outside
+                self.add(channel, self.t0_ns + round(k * self.period_ns), value)
+        self.anomalies = marks
+        self._apply_marks()
 
     def index_of(self, stamp_ns: int) -> int:
         return round((stamp_ns - self.t0_ns) / self.period_ns)
@@ -211,6 +266,12 @@ class CampaignAssembler:
                 coverage[k] += 1
         else:
             self.outside_plan[channel] += 1
+            if k >= self.total and len(self.beyond[channel]) < MAX_BEYOND:
+                self.beyond[channel][k] = value
+        self._store(channel, k, value)
+
+    def _store(self, channel: str, k: int, value: float) -> None:
+        """Put sample k in its period or sine record (none: ramps, settling, baseline)."""
         slot = self._slot(k)
         if slot is None:
             self.outside += 1
@@ -296,6 +357,52 @@ class CampaignAssembler:
     def add_many(self, channel: str, stamps_ns: Iterable[int], values: Iterable[float]) -> None:
         for stamp, value in zip(stamps_ns, values, strict=True):
             self.add(channel, int(stamp), float(value))
+
+    def experiment_account(self, names: dict[int, str] | None = None) -> dict[str, Any]:
+        """Multisine time per level (settling and measured periods), planned (the first plan
+        held) against executed (the latest revision), with the realizations and their measured
+        periods, and the adaptive run's decisions (``decisions``: the generator's ``decision``
+        and ``refused`` events, as they came)."""
+
+        def per_level(plan: ExperimentPlan) -> dict[int, dict[str, Any]]:
+            out: dict[int, dict[str, Any]] = {}
+            for lv in plan.levels:
+                samples = sum(
+                    s.length
+                    for s in plan.segments
+                    if s.excitation == "multisine"
+                    and s.level == lv.level
+                    and s.kind in ("settle", "multisine")
+                )
+                out[lv.level] = {
+                    "seconds": samples / plan.fs,
+                    "realizations": len(lv.realizations),
+                    "periods": [lv.periods_of(m) for m in range(len(lv.realizations))],
+                }
+            return out
+
+        planned, executed = per_level(self.planned), per_level(self.plan)
+        levels = {}
+        for level in sorted(set(planned) | set(executed)):
+            name = (names or {}).get(level, f"level {level}")
+            levels[name] = {
+                "planned_s": planned.get(level, {}).get("seconds", 0.0),
+                "executed_s": executed.get(level, {}).get("seconds", 0.0),
+                "planned_periods": planned.get(level, {}).get("periods", []),
+                "executed_periods": executed.get(level, {}).get("periods", []),
+            }
+        total_planned = sum(v["planned_s"] for v in levels.values())
+        total_executed = sum(v["executed_s"] for v in levels.values())
+        return {
+            "revision": self.plan.revision,
+            "levels": levels,
+            "multisine_planned_s": total_planned,
+            "multisine_executed_s": total_executed,
+            "multisine_fraction": total_executed / total_planned if total_planned else 1.0,
+            "plan_planned_s": self.planned.duration_s,
+            "plan_executed_s": self.plan.duration_s,
+            "decisions": list(self.decisions),
+        }
 
     def realization_end_k(self, level: int, realization: int) -> int:
         """Plan index of the last sample of a realization's measured periods."""

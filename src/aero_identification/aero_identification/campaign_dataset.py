@@ -108,6 +108,7 @@ def campaign_dataset(
             dataset.excluded_sines.append(f"{rec.name}: {rec.problem()}")
             dataset.warnings.append(f"{rec.name}: not used for validation ({rec.problem()})")
     dataset.quality = data_quality(assembler, dataset, final)
+    dataset.experiment = assembler.experiment_account(names)
     return dataset
 
 

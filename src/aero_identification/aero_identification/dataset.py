@@ -103,6 +103,9 @@ class Dataset:
         excluded_sines: sine records left out, each with its reason.
         warnings: what the adapter noticed (a transient, a sine not used), for the report.
         source: one line naming the source (a bag, a directory of CSV files, a live stream).
+        experiment: a campaign's executed plan against the planned one (multisine time per
+            level, the adaptive run's decisions; CampaignAssembler.experiment_account); empty
+            for records.
     """
 
     fs: float
@@ -113,6 +116,7 @@ class Dataset:
     excluded_sines: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     source: str = ""
+    experiment: dict[str, Any] = field(default_factory=dict)
 
     @property
     def clean(self) -> bool:

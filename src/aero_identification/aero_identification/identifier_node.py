@@ -11,6 +11,13 @@ publishes ``/identification/model`` (JSON, latched) and ``/identification/status
 and the report (Table 1 Markdown/CSV, PNG figures) to ``output_dir`` and, with
 ``exit_after_final``, exits (the campaign's end).
 
+Adaptive runs (``adaptive``; docs/design.md §4.3): after each measured multisine period the
+node judges the level's periods so far by the stop and extend rules (adaptive.py) and sends
+the generator a request on ``/experiment/control`` (end the realization, finish the level, add
+a realization, go on; multisine_gen.revision). It follows the plan's revisions on
+``/experiment/plan``, and models.json (``experiment``) gives the multisine time per level,
+planned against executed, and every decision.
+
 Data quality: ``/experiment/anomaly`` records (rig_runtime.anomaly) exclude the periods and sine
 records they touch; every plan sample is accounted for on both channels. What was lost or
 excluded is named in ``/identification/status``, ``models.json`` (``data_quality``), the
@@ -28,13 +35,17 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from multisine_gen.plan import PlanError
 from multisine_gen.plan_format import read_plan_message
+from multisine_gen.revision import PlanRequest
 from rig_runtime import Node, Parameter, run_node, stamp_to_ns
 from rig_runtime.anomaly import Anomaly
 from rig_runtime.diagnostics import diagnostic_array
 from rig_runtime.interface import (
     EXPERIMENT_ANOMALY,
+    EXPERIMENT_CONTROL,
     EXPERIMENT_PLAN,
     EXPERIMENT_SEGMENT,
     IDENTIFICATION_MODEL,
@@ -46,9 +57,10 @@ from rig_runtime.interface import (
 )
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
-from . import refit_worker
+from . import adaptive, refit_worker
 from .campaign import CampaignAssembler
 from .config import config_from_parameters, config_parameters
+from .data import PeriodicData
 from .quality import data_quality_lines
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)
@@ -60,6 +72,8 @@ PARAMETERS = [
     Parameter("output_dir", "", "run directory for models.json and the report ('' = none)"),
     # The identification hyperparameters, declared with their ranges in config.py.
     *config_parameters(),
+    # Adaptive runs: the switch and the rules' thresholds, declared in adaptive.py.
+    *adaptive.PARAMETERS,
     Parameter("use_worker", True, "refit in a worker process (false: inline, for debugging)"),
     Parameter(
         "exit_after_final",
@@ -114,6 +128,20 @@ class Identifier:
         self.final_done = False
         self.samples = {"u": 0, "y": 0}
         self.executor: ProcessPoolExecutor | None = None
+        # Adaptive runs: the rules, the generator's bounds (from the plan message), the periods
+        # waiting to be judged (end k, level, realization, period) and, per level, the BLA's
+        # errors on its newest realizations (the model-convergence rule).
+        self.rules = adaptive.AdaptiveRules.from_parameters(p.as_dict())
+        self.bounds = adaptive.Bounds()
+        self.to_judge: list[tuple[int, int, int, int]] = []
+        self.bla_errors: dict[int, list[float]] = {}
+        self.control_pub = (
+            node.create_publisher(
+                EXPERIMENT_CONTROL.type, EXPERIMENT_CONTROL.name, EXPERIMENT_CONTROL.qos
+            )
+            if p["adaptive"]
+            else None
+        )
         if p["use_worker"]:
             self._start_worker()
         self.model_pub = node.create_publisher(
@@ -184,7 +212,25 @@ class Identifier:
             self.node.logger.error("%s: %s; stopping", EXPERIMENT_PLAN.name, exc)
             self.node.request_shutdown(1)
             return
+        adaptation = json.loads(msg.data).get("adaptation")
+        if adaptation:
+            self.bounds = adaptive.Bounds.from_dict(adaptation)
         if self.assembler is not None and t0_ns == self.assembler.t0_ns:
+            if plan.revision > self.assembler.plan.revision:
+                try:
+                    self.assembler.revise(plan)
+                except ValueError as exc:
+                    self.errors.append(f"{EXPERIMENT_PLAN.name}: {exc}")
+                    self.node.logger.error("%s; the previous revision is kept", self.errors[-1])
+                    return
+                self.models_stale = True
+                self.node.logger.info(
+                    "plan revision %d: %d samples (%.1f s), %d multisine blocks",
+                    plan.revision,
+                    plan.total_samples,
+                    plan.duration_s,
+                    len(self.assembler.blocks),
+                )
             return
         self.assembler = CampaignAssembler(plan, t0_ns)
         self.node.logger.info(
@@ -267,8 +313,26 @@ class Identifier:
             self.pending.append((int(event["samples"]) - 1, True, "plan end", False))
         elif kind == "plan_aborted":
             self.pending.append((int(event["samples"]) - 1, True, "plan aborted", True))
+        elif kind in ("decision", "refused"):
+            self.assembler.decisions.append(event)
+            if event.get("request") == "end_realization" and "from_k" in event:
+                # The realization ended at the period just judged: its refit is due now.
+                after_k = int(event["after_k"])
+                if int(event["from_k"]) == after_k + 1:
+                    seg = self.assembler.plan.segment_at(after_k)
+                    self.pending.append(
+                        (
+                            after_k,
+                            False,
+                            f"level {seg.level} realization {seg.realization} complete",
+                            True,
+                        )
+                    )
         elif kind == "end" and event.get("kind") == "multisine":
             level, real = int(event["level"]), int(event["realization"])
+            if self.control_pub is not None and event.get("period") is not None:
+                end_k = int(event["start_k"]) + int(event["length"]) - 1
+                self.to_judge.append((end_k, level, real, int(event["period"])))
             block = self.assembler.blocks.get((level, real))
             if block is not None and int(event.get("period", -1)) == block.P - 1:
                 end_k = int(event["start_k"]) + int(event["length"]) - 1
@@ -307,6 +371,10 @@ class Identifier:
             self.publish_status()
         if self.future is not None and self.future.done():
             self._collect()
+        if self.to_judge and self.assembler is not None:
+            have = min(self.last_k["u"], self.last_k["y"])
+            while self.to_judge and self.to_judge[0][0] <= have:
+                self._judge(*self.to_judge.pop(0))
         if self.future is not None or not self.pending or self.assembler is None:
             return
         have = min(self.last_k["u"], self.last_k["y"])
@@ -319,6 +387,67 @@ class Identifier:
         self.models_stale |= any(item[3] for item in ready)
         self.pending = [item for item in self.pending if item[0] > have]
         self._start_refit(final, reason)
+
+    # -- adaptive runs ----------------------------------------------------------------------
+    def _judge(self, end_k: int, level: int, realization: int, period: int) -> None:
+        """Judge the level after one measured period and send the generator its request."""
+        assert self.assembler is not None and self.control_pub is not None
+        try:
+            verdict = self._verdict(level, realization, period)
+        except Exception as exc:  # the rules must never leave the generator waiting
+            detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            self.node.logger.error("adaptive rules failed on level %d: %s", level, detail)
+            verdict = adaptive.Verdict("go_on", f"rules failed: {detail}")
+        request = PlanRequest(verdict.action, level, end_k, verdict.reason)
+        self.control_pub.publish(
+            self.node.new_message(EXPERIMENT_CONTROL.type, data=request.to_json())
+        )
+        log = self.node.logger.info if verdict.action == "go_on" else self.node.logger.warning
+        log(
+            "level %d realization %d period %d: %s (%s)",
+            level,
+            realization,
+            period,
+            verdict.action.replace("_", " "),
+            verdict.reason,
+        )
+
+    def _verdict(self, level: int, realization: int, period: int) -> adaptive.Verdict:
+        assert self.assembler is not None
+        asm = self.assembler
+        plan_level = next(lv for lv in asm.plan.levels if lv.level == level)
+        lines = np.asarray(plan_level.realizations[0].excited_lines)
+        block = asm.blocks[(level, realization)]
+        valid = np.flatnonzero(block.period_valid()[: period + 1])
+        current = PeriodicData(block.u[:, valid, None], block.y[:, valid, None], asm.fs, lines)
+        columns = [
+            np.flatnonzero(asm.blocks[(level, m)].period_valid()) for m in range(realization)
+        ]
+        columns.append(valid)
+        count = min(len(c) for c in columns)
+        level_data = None
+        if count >= 2 and len(columns) >= 2:
+            blocks = [asm.blocks[(level, m)] for m in range(realization + 1)]
+            cols = [c[-count:] for c in columns]
+            level_data = PeriodicData(
+                np.stack([b.u[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
+                np.stack([b.y[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
+                asm.fs,
+                lines,
+            )
+        offsets = sorted(lv.offset_deg for lv in asm.plan.levels)
+        return adaptive.judge_period(
+            current,
+            level_data,
+            periods_done=period + 1,
+            last_period=period == block.P - 1,
+            realization=realization,
+            planned_realizations=len(plan_level.realizations),
+            rank=(offsets.index(plan_level.offset_deg), len(offsets)),
+            rules=self.rules,
+            bounds=self.bounds,
+            errors=self.bla_errors.setdefault(level, []),
+        )
 
     def _start_refit(self, final: bool, reason: str) -> None:
         assert self.assembler is not None

@@ -213,6 +213,7 @@ def _finish(dataset: Dataset, result: IdentificationResult, t_start: float) -> N
     result.warnings[:0] = [w for w in dataset.warnings if w not in result.warnings]
     result.excluded_sines = list(dataset.excluded_sines)
     result.data_quality = dataset.quality
+    result.experiment = dataset.experiment
     result.timings_s["total"] = time.perf_counter() - t_start
 
 

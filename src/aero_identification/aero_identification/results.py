@@ -68,6 +68,7 @@ class IdentificationResult:
     level1_signature: bytes = b""  # which level-1 periods the level-1 PNLSS was trained on
     excluded_sines: list[str] = field(default_factory=list)
     data_quality: dict[str, Any] = field(default_factory=dict)  # the dataset's account
+    experiment: dict[str, Any] = field(default_factory=dict)  # Dataset.experiment
     source: str = ""
     sines_planned: bool = False  # the source plans sine records: Table 1 is part of the result
     scan: ScanResult | None = None  # the structure scan of the all-levels PNLSS (config.scan)
@@ -160,6 +161,7 @@ class IdentificationResult:
             "predictions": [_trim_prediction(p) for p in self.predictions],
             "warnings": self.warnings,
             "data_quality": self.data_quality,
+            "experiment": self.experiment,
             "timings_s": self.timings_s,
             "pnlss_scan": None
             if self.scan is None

@@ -59,6 +59,11 @@ def test_the_node_declares_every_field_with_its_default_and_range() -> None:
         "exit_after_final",
         "max_early_samples",
         "input_qos",
+        # the adaptive run's switch and rules, declared in adaptive.py
+        "adaptive",
+        "adaptive_noise_db",
+        "adaptive_total_db",
+        "adaptive_min_cluster_periods",
     }
     for f in FIELDS:
         p = declared[f.name]

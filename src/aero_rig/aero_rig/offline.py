@@ -28,6 +28,7 @@ from rig_runtime.anomaly import Anomaly
 from rig_runtime.interface import (
     EXPERIMENT_ANOMALY,
     EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
     IDENTIFICATION_MODEL,
     PITCH_JOINT,
     PITCH_STATE,
@@ -114,10 +115,17 @@ def _read_bag(source: Path, path: Path) -> tuple[BagData | None, Exception | Non
             )
         try:
             plan_conns = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
-            message: str | None = None
+            messages: list[str] = []
             for conn, _, raw in reader.messages(connections=plan_conns):
                 plan_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
-                message = plan_msg.data
+                messages.append(plan_msg.data)
+            # An adaptive run's decisions (multisine_gen.revision), for its report.
+            segment_conns = [c for c in reader.connections if c.topic == EXPERIMENT_SEGMENT.name]
+            decisions: list[dict[str, Any]] = []
+            for conn, _, raw in reader.messages(connections=segment_conns) if segment_conns else ():
+                event = json.loads(reader.deserialize(raw, conn.msgtype).data)
+                if event.get("event") in ("decision", "refused"):
+                    decisions.append(event)
             recorded_config = None
             model_conns = [c for c in reader.connections if c.topic == IDENTIFICATION_MODEL.name]
             # (no connection at all would mean every message to rosbags)
@@ -129,13 +137,22 @@ def _read_bag(source: Path, path: Path) -> tuple[BagData | None, Exception | Non
                     warnings.append(f"bag {path}: an /identification/model message is not JSON")
         except Exception as exc:  # a damaged chunk
             return None, exc
-        if message is None:
+        if not messages:
             raise BagError(f"bag {path}: /experiment/plan holds no message")
+        # The run's plans: the last run's (its t0) as first published, and its latest revision
+        # (an adaptive run's executed plan, every sample before each change unchanged).
         try:
-            plan, t0_ns = read_plan_message(message)
+            plans = [read_plan_message(m) for m in messages]
         except PlanError as exc:
             raise BagError(f"bag {path}: {exc}") from exc
-        assembler = CampaignAssembler(plan, t0_ns)
+        t0_ns = plans[-1][1]
+        revisions = [p for p, t0 in plans if t0 == t0_ns]
+        assembler = CampaignAssembler(revisions[0], t0_ns)
+        latest = max(revisions, key=lambda p: p.revision)
+        if latest.revision > revisions[0].revision:
+            assembler.revise(latest)
+        plan = assembler.plan
+        assembler.decisions = [d for d in decisions if d.get("t0_ns") == t0_ns]
         wanted = [
             c
             for c in reader.connections

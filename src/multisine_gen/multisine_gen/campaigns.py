@@ -21,10 +21,10 @@ from multisine_gen.plan import (
 from multisine_gen.sine import design_sine
 from rig_runtime.interface import ActuatorLimits
 
-__all__ = ["build_plan", "default_plan", "short_plan"]
+__all__ = ["build_plan", "default_plan", "derived_seed", "short_plan"]
 
 
-def _derived_seed(seed: int, *key: int) -> int:
+def derived_seed(seed: int, *key: int) -> int:
     """A 32-bit seed for one random part, stable when other parts are added or removed."""
     return int(np.random.SeedSequence(seed, spawn_key=key).generate_state(1)[0])
 
@@ -66,7 +66,7 @@ def build_plan(
     assert isinstance(entropy, int)
     try:
         grid = design_line_grid(
-            fs, N, f_min_hz, f_max_hz, "odd_random", group_size, _derived_seed(entropy, 0)
+            fs, N, f_min_hz, f_max_hz, "odd_random", group_size, derived_seed(entropy, 0)
         )
     except ExcitationError as error:
         raise PlanError(f"multisine levels: {error}") from error
@@ -75,7 +75,7 @@ def build_plan(
         realization_list = []
         for m in range(realizations):
             try:
-                ms = random_phase_multisine(grid, std_deg, offset, _derived_seed(entropy, 1, i, m))
+                ms = random_phase_multisine(grid, std_deg, offset, derived_seed(entropy, 1, i, m))
                 if crest_factor_reduction:
                     ms = reduce_crest_factor(ms)
             except ExcitationError as error:

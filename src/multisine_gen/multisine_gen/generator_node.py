@@ -15,6 +15,19 @@ is matched on both sides, so the first sample reaches every node and the recorde
 is not ready after ``start_timeout_s`` stops the generator with an error naming it and what it
 still waits for; nothing has moved then.
 
+Adaptive runs (docs/design.md §4.3): the generator takes the identifier's requests on
+``/experiment/control`` (multisine_gen.revision: end the realization, finish the level, add a
+realization, go on) within ``adaptive_min_periods``, ``adaptive_min_realizations`` and
+``adaptive_max_realizations``. A request it carries out becomes the plan's next revision, which
+it publishes on ``/experiment/plan`` (latched; every sample already sent unchanged) with a
+``decision`` event on ``/experiment/segment`` naming the request, its reason and the change; a
+request it cannot carry out is refused, logged and recorded as a ``refused`` event, and changes
+nothing. With ``flow_control`` (simulation) and a controller matched on ``/experiment/control``,
+the stream holds at the end of each measured multisine period until the identifier's request
+on that period has come, so a simulated adaptive run is deterministic; the hold ends without it
+when the controller is gone, or after the DDS participant lease, logged. On the rig the stream
+never holds: a request takes effect at the next period boundary after it arrives.
+
 At the end of the plan it publishes a ``plan_end`` event and keeps the plan latched until
 stopped; stopped early, it publishes ``plan_aborted`` and the actuator's watchdog holds and then
 ramps to the safe angle.
@@ -29,6 +42,7 @@ from typing import Any
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
 from rig_runtime.barrier import ReadinessReport, StartBarrier
 from rig_runtime.interface import (
+    EXPERIMENT_CONTROL,
     EXPERIMENT_PLAN,
     EXPERIMENT_SEGMENT,
     GRAPH_READY,
@@ -37,11 +51,13 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
     ActuatorLimits,
 )
+from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
 from .campaigns import default_plan, short_plan
 from .pacing import StreamPacer
 from .plan import ExperimentPlan
 from .plan_format import plan_from_json, plan_message, segment_event
+from .revision import Adaptation, RefusedRequestError, RequestError, request_from_json, revise
 
 _LIMITS = ActuatorLimits()  # the defaults of the limit parameters
 
@@ -76,6 +92,25 @@ PARAMETERS = [
         "actuator rate limit the plan is checked against",
         min=0.1,
     ),
+    # Bounds on the identifier's requests in adaptive runs (multisine_gen.revision).
+    Parameter(
+        "adaptive_min_periods",
+        Adaptation.min_periods,
+        "adaptive runs: fewest measured periods of a realization",
+        min=1,
+    ),
+    Parameter(
+        "adaptive_min_realizations",
+        Adaptation.min_realizations,
+        "adaptive runs: fewest realizations of a level (2 keep the distortions separable)",
+        min=1,
+    ),
+    Parameter(
+        "adaptive_max_realizations",
+        Adaptation.max_realizations,
+        "adaptive runs: most realizations a level may grow to",
+        min=1,
+    ),
 ]
 
 DEG = 3.141592653589793 / 180.0
@@ -97,18 +132,25 @@ class Generator:
     def __init__(self, node: Node) -> None:
         self.node = node
         p = node.params
-        self.plan = load_plan(p["plan"], p["seed"])
-        # Refuse before publishing anything if the plan would leave the actuator's limits.
-        self.plan.validate(
-            ActuatorLimits(
-                min_deg=p["min_deg"], max_deg=p["max_deg"], max_rate_deg_s=p["max_rate_deg_s"]
-            )
+        self.limits = ActuatorLimits(
+            min_deg=p["min_deg"], max_deg=p["max_deg"], max_rate_deg_s=p["max_rate_deg_s"]
         )
-        self.fs = self.plan.fs
-        self.command_deg = self.plan.command_deg()
-        self.total = len(self.command_deg)
-        self.starts = {s.start_k: s for s in self.plan.segments}
-        self.ends = {s.stop_k - 1: s for s in self.plan.segments}
+        self.adaptation = Adaptation(
+            p["adaptive_min_periods"],
+            p["adaptive_min_realizations"],
+            p["adaptive_max_realizations"],
+        )
+        plan = load_plan(p["plan"], p["seed"])
+        # Refuse before publishing anything if the plan would leave the actuator's limits.
+        plan.validate(self.limits)
+        self.fs = plan.fs
+        self._use(plan)
+        self.planned_samples = self.total
+        # Adaptive runs: plan indices of the periods judged (requests in), where the stream
+        # holds now, and since when.
+        self.judged: set[int] = set()
+        self.hold_since: float | None = None
+        self.hold_s = PARTICIPANT_LEASE_S.get(node.backend_name, max(PARTICIPANT_LEASE_S.values()))
         self.cmd_pub = node.create_publisher(
             PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )
@@ -143,6 +185,12 @@ class Generator:
         node.create_subscription(
             GRAPH_READY.type, GRAPH_READY.name, self.on_ready, GRAPH_READY.qos, depth=256
         )
+        self.control_sub = node.create_subscription(
+            EXPERIMENT_CONTROL.type,
+            EXPERIMENT_CONTROL.name,
+            self.on_control,
+            EXPERIMENT_CONTROL.qos,
+        )
         node.create_timer(0.002, self.tick)
         node.logger.info(
             "plan %s: %d samples (%.1f s at %g Hz), %d segments",
@@ -152,6 +200,109 @@ class Generator:
             self.fs,
             len(self.plan.segments),
         )
+
+    def _use(self, plan: ExperimentPlan) -> None:
+        """Stream ``plan`` from here on (the first plan, or a revision)."""
+        self.plan = plan
+        self.command_deg = plan.command_deg()
+        self.total = len(self.command_deg)
+        self.starts = {s.start_k: s for s in plan.segments}
+        self.ends = {s.stop_k - 1: s for s in plan.segments}
+        if hasattr(self, "pacer"):
+            self.pacer.total = self.total
+
+    def _publish_plan(self) -> None:
+        assert self.t0_ns is not None
+        message = plan_message(self.plan, self.t0_ns, adaptation=self.adaptation.to_dict())
+        self.plan_pub.publish(self.node.new_message(EXPERIMENT_PLAN.type, data=message))
+
+    # -- adaptive runs ------------------------------------------------------------------------
+    def on_control(self, msg: Any) -> None:
+        """One request of the identifier (multisine_gen.revision)."""
+        record: dict[str, Any] = {"t0_ns": self.t0_ns, "at_k": self.k}
+        try:
+            request = request_from_json(msg.data)
+        except RequestError as exc:
+            self.node.logger.error(
+                "%s: bad request ignored, the plan is unchanged: %s", EXPERIMENT_CONTROL.name, exc
+            )
+            self._event(record | {"event": "refused", "request": msg.data, "why": str(exc)})
+            return
+        record |= {"request": request.action, "level": request.level, "after_k": request.after_k}
+        record["reason"] = request.reason
+        if self.t0_ns is None or self.finished:
+            why = "the plan has not started" if self.t0_ns is None else "the plan has ended"
+            self.node.logger.warning(
+                "refused %s on level %d: %s", request.action, request.level, why
+            )
+            self._event(record | {"event": "refused", "why": why})
+            return
+        self.judged.add(request.after_k)
+        late = self.k - 1 - request.after_k  # samples published past the judged period
+        if request.action == "go_on":
+            self._event(record | {"event": "decision", "change": ""})
+            return
+        try:
+            revision = revise(self.plan, self.k, request, self.adaptation, self.limits)
+        except (RequestError, RefusedRequestError) as exc:
+            self.node.logger.warning(
+                "refused %s on level %d (%s): %s",
+                request.action,
+                request.level,
+                request.reason,
+                exc,
+            )
+            self._event(record | {"event": "refused", "why": str(exc)})
+            return
+        self._use(revision.plan)
+        self._publish_plan()
+        self.node.logger.info(
+            "plan revision %d from sample %d%s: %s (%s)",
+            revision.plan.revision,
+            revision.from_k,
+            f", {late} samples after the judged period" if late > 0 else "",
+            revision.change,
+            request.reason,
+        )
+        self._event(
+            record
+            | {
+                "event": "decision",
+                "change": revision.change,
+                "revision": revision.plan.revision,
+                "from_k": revision.from_k,
+                "samples": self.total,
+            }
+        )
+
+    def _holds(self, k: int) -> bool:
+        """Whether sample k waits for the identifier's request on the period that ends at k-1
+        (simulation with a controller matched; module docstring)."""
+        segment = self.ends.get(k - 1)
+        if (
+            segment is None
+            or segment.kind != "multisine"
+            or not self.node.params["flow_control"]
+            or (k - 1) in self.judged
+        ):
+            self.hold_since = None
+            return False
+        if self.control_sub.publisher_count() == 0:
+            return False
+        now = time.monotonic()
+        if self.hold_since is None:
+            self.hold_since = now
+        if now - self.hold_since > self.hold_s:
+            self.node.logger.warning(
+                "no request on the period ending at sample %d within the DDS lease (%g s): "
+                "going on with the plan as it stands",
+                k - 1,
+                self.hold_s,
+            )
+            self.judged.add(k - 1)
+            self.hold_since = None
+            return False
+        return True
 
     def on_coefficients(self, msg: Any) -> None:
         if self.t0_ns is None:
@@ -207,8 +358,7 @@ class Generator:
             return False
         self.t0_ns = time.time_ns()
         self.pacer.start(time.monotonic())
-        message = plan_message(self.plan, self.t0_ns)
-        self.plan_pub.publish(self.node.new_message(EXPERIMENT_PLAN.type, data=message))
+        self._publish_plan()
         self.node.logger.info(
             "start barrier passed after %.2f s (%d nodes ready and matched); t0 = %d ns; streaming",
             now - self.created,
@@ -225,8 +375,10 @@ class Generator:
         p = self.node.params
         target = self.pacer.target(time.monotonic())
         t0_s = self.t0_ns / 1e9  # type: ignore[operator]
-        while self.k < target:
+        while self.k < min(target, self.total):
             k = self.k
+            if self._holds(k):
+                break
             segment = self.starts.get(k)
             if segment is not None:
                 self._event(segment_event(segment, "start", t0_s, self.fs) | {"t0_ns": self.t0_ns})
@@ -243,8 +395,21 @@ class Generator:
             self.k += 1
         if self.k >= self.total:
             self.finished = True
-            self._event({"event": "plan_end", "samples": self.total, "t0_ns": self.t0_ns})
-            self.node.logger.info("plan finished: %d samples published", self.total)
+            self._event(
+                {
+                    "event": "plan_end",
+                    "samples": self.total,
+                    "planned_samples": self.planned_samples,
+                    "revision": self.plan.revision,
+                    "t0_ns": self.t0_ns,
+                }
+            )
+            self.node.logger.info(
+                "plan finished: %d samples published (%d planned, revision %d)",
+                self.total,
+                self.planned_samples,
+                self.plan.revision,
+            )
             if p["exit_at_end"]:
                 self.node.request_shutdown(0)
 

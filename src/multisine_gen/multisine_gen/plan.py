@@ -74,6 +74,9 @@ class MultisineLevel:
     realizations: tuple[Multisine, ...]
     periods: int = 6  # P measured periods per realization
     settle_periods: int = 1  # transient periods before the measured ones
+    # Measured periods of each realization when they differ (an adaptive run ended one early,
+    # multisine_gen.revision); () = `periods` for every realization.
+    realization_periods: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         where = f"multisine level {self.level}"
@@ -95,6 +98,17 @@ class MultisineLevel:
                 )
         if self.periods < 1 or self.settle_periods < 0:
             raise PlanError(f"{where}: needs periods >= 1 and settle_periods >= 0")
+        object.__setattr__(self, "realization_periods", tuple(self.realization_periods))
+        counts = self.realization_periods
+        if counts and (len(counts) != len(self.realizations) or min(counts) < 1):
+            raise PlanError(
+                f"{where}: realization_periods {list(counts)} needs one count >= 1 per "
+                f"realization ({len(self.realizations)})"
+            )
+
+    def periods_of(self, realization: int) -> int:
+        """Measured periods of realization m."""
+        return self.realization_periods[realization] if self.realization_periods else self.periods
 
     @property
     def offset_deg(self) -> float:
@@ -213,6 +227,9 @@ class ExperimentPlan:
     sines: tuple[SineTest, ...] = ()
     seed: int | None = None
     limits: ActuatorLimits = field(default_factory=ActuatorLimits)
+    # 0 as designed; +1 at each change an adaptive run makes (multisine_gen.revision). A
+    # revision keeps every sample before the change.
+    revision: int = 0
     segments: tuple[Segment, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -324,7 +341,7 @@ class ExperimentPlan:
                             periods=lv.settle_periods,
                             **common,
                         )
-                    for p in range(lv.periods):
+                    for p in range(lv.periods_of(m)):
                         add(
                             kind="multisine",
                             length=ms.N,

@@ -65,6 +65,7 @@ def plan_to_dict(plan: ExperimentPlan) -> dict[str, Any]:
         "excited_lines": realizations[0].excited_lines.tolist() if shared else None,
         "detection_lines": realizations[0].detection_lines.tolist() if shared else None,
         "seed": plan.seed,
+        "revision": plan.revision,
         "rest_deg": plan.rest_deg,
         "ramp_rate_deg_s": plan.ramp_rate_deg_s,
         # The ActuatorLimits fields only (a subclass's extra settings are not the plan's).
@@ -77,6 +78,7 @@ def plan_to_dict(plan: ExperimentPlan) -> dict[str, Any]:
                 "std_deg": lv.std_deg,
                 "periods": lv.periods,
                 "settle_periods": lv.settle_periods,
+                "realization_periods": list(lv.realization_periods),
                 "realizations": [_multisine_to_dict(ms) for ms in lv.realizations],
             }
             for lv in plan.levels
@@ -121,6 +123,7 @@ def plan_from_dict(data: dict[str, Any]) -> ExperimentPlan:
                 realizations=tuple(_multisine_from_dict(ms) for ms in lv["realizations"]),
                 periods=int(lv["periods"]),
                 settle_periods=int(lv["settle_periods"]),
+                realization_periods=tuple(int(n) for n in lv.get("realization_periods", ())),
             )
             for lv in data["levels"]
         )
@@ -149,6 +152,7 @@ def plan_from_dict(data: dict[str, Any]) -> ExperimentPlan:
             sines=sines,
             seed=data["seed"],
             limits=ActuatorLimits(**data["limits"]),
+            revision=int(data.get("revision", 0)),
         )
     except PlanError:
         raise
@@ -174,11 +178,14 @@ def plan_from_json(text: str) -> ExperimentPlan:
     return plan_from_dict(data)
 
 
-def plan_message(plan: ExperimentPlan, t0_ns: int) -> str:
+def plan_message(plan: ExperimentPlan, t0_ns: int, adaptation: dict[str, int] | None = None) -> str:
     """The `/experiment/plan` message: the plan's JSON and ``t0_ns``, the stamp of sample 0
-    (docs/design.md §5)."""
+    (docs/design.md §5), and the generator's bounds on an adaptive run's requests
+    (multisine_gen.revision.Adaptation) when given."""
     payload = plan_to_dict(plan)
     payload["t0_ns"] = int(t0_ns)
+    if adaptation is not None:
+        payload["adaptation"] = dict(adaptation)
     return json.dumps(payload, allow_nan=False)
 
 

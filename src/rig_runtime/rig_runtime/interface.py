@@ -24,6 +24,7 @@ __all__ = [
     "ALPHA_TRUE_JOINT",
     "DIAGNOSTICS",
     "EXPERIMENT_ANOMALY",
+    "EXPERIMENT_CONTROL",
     "EXPERIMENT_PLAN",
     "EXPERIMENT_SEGMENT",
     "GRAPH_READY",
@@ -97,6 +98,13 @@ EXPERIMENT_SEGMENT = Topic(
     "events",
     "JSON event at each segment boundary of the plan, and plan_end (multisine_gen.plan_format)",
 )
+EXPERIMENT_CONTROL = Topic(
+    "/experiment/control",
+    "std_msgs/msg/String",
+    "events",
+    "adaptive runs: the identifier's JSON request to the generator after each measured period "
+    "(end the realization, finish the level, add a realization, go on; multisine_gen.revision)",
+)
 EXPERIMENT_ANOMALY = Topic(
     "/experiment/anomaly",
     "std_msgs/msg/String",
@@ -137,6 +145,7 @@ TOPICS: tuple[Topic, ...] = (
     WING_COEFFICIENTS,
     EXPERIMENT_PLAN,
     EXPERIMENT_SEGMENT,
+    EXPERIMENT_CONTROL,
     EXPERIMENT_ANOMALY,
     IDENTIFICATION_STATUS,
     IDENTIFICATION_MODEL,

@@ -71,6 +71,12 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--timeout", type=float, default=0.0, help="give up after S wall seconds")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument(
+        "--adaptive",
+        action="store_true",
+        help="let the identifier end realizations and levels that converged and add "
+        "realizations where they did not (identifier parameter adaptive; docs/design.md §4.3)",
+    )
+    p.add_argument(
         "--allow-excluded",
         action="store_true",
         help="exit 0 even if data were lost or excluded (they are still listed)",
@@ -144,7 +150,11 @@ def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dic
             "real_time_factor": args.real_time_factor,
         },
         "recorder": {"output": str(run_dir / "bag")},
-        "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
+        "identifier": {
+            "output_dir": str(run_dir),
+            "exit_after_final": True,
+            **({"adaptive": True} if args.adaptive else {}),
+        },
     }
 
 
@@ -342,6 +352,8 @@ def print_results(run_dir: Path, summary: dict[str, Any], bad: dict[str, int]) -
     if clustering.exists():
         print("\nWhat the period clustering changed (clustering.md, table1_no_clustering.md):")
         print("\n".join(x for x in clustering.read_text().splitlines() if x.startswith("|")))
+    for line in experiment_lines(run_dir):
+        print(line)
     print(
         f"\nwall time {summary['wall_s']} s for {summary['experiment_s']} s of experiment "
         f"({summary['real_time_factor']}x real time)"
@@ -349,6 +361,28 @@ def print_results(run_dir: Path, summary: dict[str, Any], bad: dict[str, int]) -
     print(f"run directory: {run_dir}  (bag/, models.json, table1_*.md|csv, *.png, logs/)")
     if bad:
         print(f"aero-rig: warning: nodes stopped uncleanly: {bad}", file=sys.stderr)
+
+
+def experiment_lines(run_dir: Path) -> list[str]:
+    """Multisine time per level, planned against executed (models.json ``experiment``), when
+    the run revised its plan (an adaptive run); nothing for a run that played it as planned."""
+    try:
+        account = json.loads((run_dir / "models.json").read_text()).get("experiment") or {}
+    except (OSError, ValueError):
+        return []
+    if not account.get("revision") and not account.get("decisions"):
+        return []
+    lines = [
+        f"\nadaptive run: multisine time {account['multisine_executed_s']:.0f} s of "
+        f"{account['multisine_planned_s']:.0f} s planned "
+        f"({100 * account['multisine_fraction']:.0f} %), plan revision {account['revision']}:"
+    ]
+    for name, level in account["levels"].items():
+        lines.append(
+            f"  {name}: {level['executed_s']:.0f} s of {level['planned_s']:.0f} s, measured "
+            f"periods {level['executed_periods']} (planned {level['planned_periods']})"
+        )
+    return lines
 
 
 def print_problems(run_dir: Path, problems: list[str]) -> None:

@@ -20,6 +20,7 @@ class CampaignMonitor:
         self.liveness = Liveness(stall_bound_s(backend))
         self.node = Node("aero_rig_campaign", argv=[])  # the graph's backend (the env's)
         self.total = 0
+        self.revision = -1  # of the plan held (an adaptive run revises it)
         self.fs = 0.0  # the plan's sample rate [Hz]
         self.k = 0
         self.state = ""
@@ -42,6 +43,9 @@ class CampaignMonitor:
             plan, _ = read_plan_message(msg.data)
         except PlanError:
             return  # the identifier refuses it, naming why, and the graph stops
+        if plan.revision < self.revision:
+            return
+        self.revision = plan.revision
         self.total = plan.total_samples
         self.fs = plan.fs
         self.liveness.total = plan.total_samples
@@ -51,6 +55,8 @@ class CampaignMonitor:
         if event.get("event") == "end":
             self.k = int(event["start_k"]) + int(event["length"])
         elif event.get("event") in ("plan_end", "plan_aborted"):
+            if event.get("event") == "plan_end":
+                self.total = self.liveness.total = int(event.get("samples", self.total))
             self.k = self.total
             self.liveness.plan_ended(time.monotonic())
 

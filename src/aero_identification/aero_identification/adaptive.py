@@ -1,0 +1,281 @@
+"""The adaptive experiment's stop and extend rules (docs/design.md §4.3).
+
+After each measured multisine period the identifier judges the level's periods so far and sends
+the generator one request (multisine_gen.revision). The rules use only what the identification
+estimates anyway; every threshold is a parameter (:class:`AdaptiveRules`).
+
+- **Floor**: a realization keeps at least ``min_periods`` measured periods and a level at least
+  ``min_realizations`` realizations (the generator's bounds, in the plan message), so the
+  noise and the nonlinear distortions stay separable (Pintelon & Schoukens 2012, §3.4).
+- **Periods (end the realization)**: the noise variance of the FRF of the realization so far,
+  relative to |G|² and averaged over the excited lines, is below ``noise_db``. The robust BLA's
+  noise variance of the mean over P periods falls as 1/P (Pintelon & Schoukens 2012, §4.3.1,
+  eq. 4-31); once it is below the threshold a further period adds nothing the realizations
+  cannot give. Periods outside the dominant cluster (cycle-to-cycle variation of dynamic stall):
+  while the realization's periods split into clusters it goes on.
+- **Realizations (finish the level, or add one)**, when a realization has ended:
+  - BLA convergence: the total variance (noise and stochastic nonlinear distortions, over the
+    realizations) relative to |G|² is below ``total_db`` (§4.3.1, eq. 4-32);
+  - clustering: when the clustering splits the level's periods into regimes, its dominant
+    cluster holds at least ``min_cluster_periods`` periods (a level in one regime has all its
+    periods in it, and the variance rule judges them);
+  - model convergence: the error of the level's BLA from the earlier realizations on the newest
+    one (relative RMS on the excited lines) improved on the previous such error by no more than
+    its own spread (the newest realization's noise level), or there is no previous error yet.
+  All three and the floor met: the level is finished after this realization; otherwise another
+  realization is added while the budget (``max_realizations``) allows.
+
+Pure functions on PeriodicData; no ROS.
+"""
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from rig_runtime.params import Parameter
+
+from .bla import estimate_bla
+from .clustering import period_clusters
+from .data import PeriodicData
+
+Action = Literal["go_on", "end_realization", "finish_level", "add_realization"]
+
+
+@dataclass(frozen=True)
+class AdaptiveRules:
+    """Thresholds of the rules (the identifier's ``adaptive_*`` parameters, PARAMETERS).
+
+    noise_db, total_db: for the low, medium and high levels (AdaptiveRules.at; one value for
+    all). The noise threshold is one for every level. The total variance holds the stochastic
+    nonlinear distortions too, which only more realizations average out (1/M), and at the high
+    offset dynamic stall's cycle-to-cycle variation makes them large: the default campaign's
+    two realizations end near −13 dB there, the low level near −37 dB (docs/design.md §4.3).
+    At −20 dB the high level would take every realization the budget allows and still not
+    converge, so its default is −10 dB and the period clustering decides there.
+    """
+
+    noise_db: tuple[float, ...] = (-20.0,)
+    total_db: tuple[float, ...] = (-20.0, -20.0, -10.0)
+    min_cluster_periods: int = 8
+
+    @staticmethod
+    def at(values: tuple[float, ...], rank: int, levels: int) -> float:
+        """The threshold of the level of offset rank ``rank`` (0 = lowest) of ``levels``: the
+        values are for the low, medium and high levels as campaign_dataset names them (two
+        levels are low and high), the last one for any level beyond."""
+        position = {1: [0], 2: [0, 2]}.get(levels, list(range(levels)))[rank]
+        return float(values[min(position, len(values) - 1)])
+
+    @classmethod
+    def from_parameters(cls, values: dict[str, Any]) -> "AdaptiveRules":
+        return cls(
+            tuple(values["adaptive_noise_db"]),
+            tuple(values["adaptive_total_db"]),
+            int(values["adaptive_min_cluster_periods"]),
+        )
+
+
+_DEFAULT = AdaptiveRules()
+PARAMETERS = [
+    Parameter(
+        "adaptive",
+        False,
+        "steer the generator: end realizations and levels that converged, add realizations "
+        "where they did not (aero-rig campaign --adaptive)",
+    ),
+    Parameter(
+        "adaptive_noise_db",
+        list(_DEFAULT.noise_db),
+        "adaptive: a realization ends once its FRF noise variance / |G|^2 is below this [dB], "
+        "for the low, medium and high levels",
+        element_type=float,
+    ),
+    Parameter(
+        "adaptive_total_db",
+        list(_DEFAULT.total_db),
+        "adaptive: a level ends once its FRF total variance / |G|^2 is below this [dB], per "
+        "the low, medium and high levels",
+        element_type=float,
+    ),
+    Parameter(
+        "adaptive_min_cluster_periods",
+        _DEFAULT.min_cluster_periods,
+        "adaptive: periods a level's dominant cluster must hold before it ends",
+        min=1,
+    ),
+]
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """The generator's bounds on requests (multisine_gen.revision.Adaptation, from the plan
+    message)."""
+
+    min_periods: int = 2
+    min_realizations: int = 2
+    max_realizations: int = 4
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any] | None) -> "Bounds":
+        return cls(**values) if values else cls()
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What the rules say about a level after one period: the request and its reason, with the
+    figures it was taken on (logged, recorded in the request and in models.json)."""
+
+    action: Action
+    reason: str
+    figures: dict[str, float] = field(default_factory=dict)
+
+
+def relative_variance_db(var: np.ndarray, G: np.ndarray) -> float:
+    """10·log10 of mean over the excited lines of var / |G|² (the band's relative variance)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.asarray(var, float) / np.abs(G) ** 2
+    ratio = ratio[np.isfinite(ratio)]
+    if ratio.size == 0:
+        return math.inf
+    mean = float(np.mean(ratio))
+    return 10.0 * math.log10(mean) if mean > 0 else -math.inf
+
+
+def _excited(data: PeriodicData) -> tuple[np.ndarray, np.ndarray]:
+    """(F, P, M) input and output spectra at the excited lines."""
+    return data.U[data.excited_lines], data.Y[data.excited_lines]
+
+
+def noise_db(data: PeriodicData) -> float:
+    """Relative noise variance (dB) of the FRF of one realization, the mean over its P >= 2
+    periods: the robust estimate with M = 1 (Pintelon & Schoukens 2012, eq. 4-31)."""
+    U, Y = _excited(data)
+    Gp = Y[:, :, -1] / U[:, :, -1]
+    G = Gp.mean(axis=1)
+    P = Gp.shape[1]
+    var = np.sum(np.abs(Gp - G[:, None]) ** 2, axis=1) / (P * (P - 1))
+    return relative_variance_db(var, G)
+
+
+def dominant_periods(data: PeriodicData) -> tuple[int, np.ndarray]:
+    """Periods in the dominant cluster, and the (P, M) mask of them (all when too few)."""
+    if data.P * data.M < 3:
+        return data.P * data.M, np.ones((data.P, data.M), dtype=bool)
+    result = period_clusters(data)
+    return int(result.sizes[0]), result.keep
+
+
+def bla_error(earlier: PeriodicData, newest: PeriodicData) -> tuple[float, float]:
+    """Relative RMS error of the earlier realizations' BLA on the newest realization's mean
+    period, on the excited lines, and its spread (the newest realization's noise level
+    relative to its output, the error a perfect model would show)."""
+    U0, Y0 = _excited(earlier)
+    G = np.mean(Y0 / U0, axis=(1, 2))
+    U, Y = _excited(newest)
+    Ubar, Ybar = U.mean(axis=1)[:, 0], Y.mean(axis=1)[:, 0]
+    scale = float(np.sqrt(np.sum(np.abs(Ybar) ** 2)))
+    error = float(np.sqrt(np.sum(np.abs(Ybar - G * Ubar) ** 2))) / scale
+    P = Y.shape[1]
+    noise = np.sum(np.abs(Y[:, :, 0] - Ybar[:, None]) ** 2) / (P * (P - 1)) if P > 1 else 0.0
+    return error, float(np.sqrt(noise)) / scale
+
+
+def judge_period(
+    current: PeriodicData,
+    level_data: PeriodicData | None,
+    periods_done: int,
+    last_period: bool,
+    realization: int,
+    planned_realizations: int,
+    rank: tuple[int, int],
+    rules: AdaptiveRules,
+    bounds: Bounds,
+    errors: list[float],
+) -> Verdict:
+    """The verdict after a measured period of realization ``realization`` (0-based).
+
+    current: the valid periods of this realization so far (M = 1); level_data: every
+    realization's valid periods so far (the newest last; the same count per realization;
+    None when fewer than two realizations have two valid periods);
+    periods_done: measured periods of this realization so far; last_period: the plan ends the
+    realization here; planned_realizations: realizations the plan has for the level now;
+    errors: the level's BLA validation errors on its earlier newest realizations (this
+    function appends the newest when a realization ends).
+    """
+    figures: dict[str, float] = {}
+    noise_limit = rules.at(rules.noise_db, *rank)
+    total_limit = rules.at(rules.total_db, *rank)
+    if not last_period:
+        if periods_done < bounds.min_periods or current.P < 2:
+            return Verdict("go_on", f"{periods_done} of at least {bounds.min_periods} periods")
+        figures["noise_db"] = noise_db(current)
+        clusters, _ = dominant_periods(current)
+        figures["cluster_periods"] = clusters
+        if figures["noise_db"] >= noise_limit:
+            return Verdict(
+                "go_on",
+                f"noise {figures['noise_db']:.1f} dB of |G|² ≥ {noise_limit:g} dB",
+                figures,
+            )
+        if clusters < current.P:
+            return Verdict(
+                "go_on",
+                f"its periods split into regimes (dominant cluster {clusters} of {current.P})",
+                figures,
+            )
+        return Verdict(
+            "end_realization",
+            f"noise {figures['noise_db']:.1f} dB of |G|² < {noise_limit:g} dB after "
+            f"{periods_done} periods",
+            figures,
+        )
+    # The realization ends here: finish the level or add one.
+    done = realization + 1
+    more = planned_realizations - done  # realizations the plan still has for the level
+    if level_data is None or level_data.M < 2:
+        if done < bounds.min_realizations:
+            return Verdict(
+                "go_on", f"{done} realization(s): the floor is {bounds.min_realizations}"
+            )
+        return Verdict("go_on", "too few valid periods to judge the level")
+    bla = estimate_bla(level_data, method="robust")
+    figures["total_db"] = relative_variance_db(bla.var_total, bla.G)
+    figures["noise_db"] = relative_variance_db(bla.var_noise, bla.G)
+    size, _ = dominant_periods(level_data)
+    split = size < level_data.P * level_data.M
+    figures["cluster_periods"] = size
+    earlier = level_data.select_realizations(list(range(level_data.M - 1)))
+    newest = level_data.select_realizations([level_data.M - 1])
+    error, spread = bla_error(earlier, newest)
+    figures["bla_error"], figures["bla_error_spread"] = error, spread
+    improving = bool(errors) and errors[-1] - error > spread
+    errors.append(error)
+    problems = []
+    if figures["total_db"] >= total_limit:
+        problems.append(f"total variance {figures['total_db']:.1f} dB ≥ {total_limit:g} dB")
+    if split and size < rules.min_cluster_periods:
+        problems.append(
+            f"periods split into regimes: dominant cluster {size} < "
+            f"{rules.min_cluster_periods} periods"
+        )
+    if improving:
+        problems.append(f"BLA error on the newest realization still improving ({error:.3g})")
+    if done < bounds.min_realizations:
+        return Verdict("go_on", f"{done} realization(s): the floor is {bounds.min_realizations}")
+    if not problems:
+        reason = (
+            f"converged: total variance {figures['total_db']:.1f} dB, dominant cluster {size}, "
+            f"BLA error {error:.3g} (spread {spread:.2g})"
+        )
+        return Verdict("finish_level" if more > 0 else "go_on", reason, figures)
+    if more > 0:
+        return Verdict("go_on", "; ".join(problems), figures)
+    if done >= bounds.max_realizations:
+        return Verdict(
+            "go_on",
+            "; ".join(problems) + f"; the budget ({bounds.max_realizations}) is spent",
+            figures,
+        )
+    return Verdict("add_realization", "; ".join(problems), figures)
