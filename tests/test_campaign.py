@@ -17,6 +17,7 @@ from rosbags.highlevel import AnyReader
 from aero_rig.verdict import STREAM_TOPICS
 from rig_runtime.interface import (
     EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
     PITCH_COMMAND,
     PITCH_STATE,
     PRESSURE_TAPS,
@@ -450,3 +451,74 @@ def test_sigterm_stops_the_campaign_and_every_node_and_keeps_the_bag(tmp_path: P
     assert wait_for(lambda: all(process_gone(p) for p in nodes), 30), [p.cmdline() for p in nodes]
     with AnyReader([run / "bag"]) as reader:  # finalised by the recorder on its SIGINT
         assert reader.message_count > 0
+
+
+@pytest.fixture(scope="module")
+def adaptive_campaign(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[Path, subprocess.CompletedProcess[str]]:
+    run = tmp_path_factory.mktemp("adaptive") / "run"
+    proc = _aero_rig(
+        *("campaign", "--plan", "short", "--adaptive", *WING, "--out", str(run), "--quiet"),
+        *TIMEOUT_600,
+        env=graph_env(),
+        timeout=700,
+    )
+    return run, proc
+
+
+def _bag_plans_and_commands(bag: Path) -> tuple[list[Any], list[dict[str, Any]], np.ndarray]:
+    """The bag's /experiment/plan revisions, its decision events and its commands [deg]."""
+    from multisine_gen.plan_format import read_plan_message
+
+    plans, decisions, commands = [], [], []
+    with AnyReader([bag]) as reader:
+        conns = [
+            c
+            for c in reader.connections
+            if c.topic in (EXPERIMENT_PLAN.name, EXPERIMENT_SEGMENT.name, PITCH_COMMAND.name)
+        ]
+        for conn, _, raw in reader.messages(connections=conns):
+            msg: Any = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == EXPERIMENT_PLAN.name:
+                plans.append(read_plan_message(msg.data)[0])
+            elif conn.topic == EXPERIMENT_SEGMENT.name:
+                event = json.loads(msg.data)
+                if event.get("event") in ("decision", "refused"):
+                    decisions.append(event)
+            else:
+                commands.append((stamp_to_ns(msg.header.stamp), np.degrees(msg.position[0])))
+    commands.sort()
+    return plans, decisions, np.array([c[1] for c in commands])
+
+
+def test_adaptive_campaign_is_clean_and_its_bag_reproduces_the_executed_plan(
+    adaptive_campaign, tmp_path: Path
+) -> None:
+    run, proc = adaptive_campaign
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "adaptive run: multisine time" in proc.stdout
+    account = json.loads((run / "models.json").read_text())["experiment"]
+    # The low level converges at the floor of periods (its noise is ~ -31 dB of |G|^2 after
+    # two); the executed plan is shorter than the planned one.
+    assert account["revision"] >= 1
+    assert account["levels"]["low"]["executed_periods"] == [2, 2]
+    assert account["multisine_executed_s"] < account["multisine_planned_s"]
+    plans, decisions, commands = _bag_plans_and_commands(run / "bag")
+    executed = max(plans, key=lambda p: p.revision)
+    assert executed.revision == account["revision"] == plans[-1].revision
+    # Every revision has its decision event, with the request's reason; every sample the
+    # generator sent is the executed plan's, and the bag holds them all.
+    changes = [d for d in decisions if d["event"] == "decision" and d.get("change")]
+    assert [d["revision"] for d in changes] == list(range(1, executed.revision + 1))
+    assert all(d["reason"] for d in changes)
+    assert len(commands) == executed.total_samples
+    np.testing.assert_allclose(commands, executed.command_deg(), atol=1e-9)
+    # The bag alone gives the campaign's report: the same tables, the same account.
+    fit = _aero_rig("fit", str(run / "bag"), "--out", str(tmp_path / "fit"), env=graph_env(),
+                    timeout=600)  # fmt: skip
+    assert fit.returncode == 0, fit.stderr
+    for name in ("table1_all_levels.md", "table1_level1.md"):
+        assert (run / name).read_text().strip() == (tmp_path / "fit" / name).read_text().strip()
+    offline = json.loads((tmp_path / "fit" / "models.json").read_text())["experiment"]
+    assert offline == account
