@@ -1,4 +1,4 @@
-"""The adaptive experiment's stop and extend rules (docs/design.md §4.3).
+"""The adaptive experiment's stop and extend rules (docs/design.md §7.9).
 
 After each measured multisine period the identifier judges the level's periods so far and sends
 the generator one request (multisine_gen.revision). The rules use only what the identification
@@ -6,16 +6,17 @@ estimates anyway; every threshold is a parameter (:class:`AdaptiveRules`).
 
 - **Floor**: a realization keeps at least ``min_periods`` measured periods and a level at least
   ``min_realizations`` realizations (the generator's bounds, in the plan message), so the
-  noise and the nonlinear distortions stay separable (Pintelon & Schoukens 2012, §3.4).
+  noise and the nonlinear distortions stay separable (the robust BLA's total variance needs
+  M >= 2 realizations, Pintelon & Schoukens 2012, §4.3.1).
 - **Periods (end the realization)**: the noise variance of the FRF of the realization so far,
   relative to |G|² and averaged over the excited lines, is below ``noise_db``. The robust BLA's
-  noise variance of the mean over P periods falls as 1/P (Pintelon & Schoukens 2012, §4.3.1,
-  eq. 4-31); once it is below the threshold a further period adds nothing the realizations
-  cannot give. Periods outside the dominant cluster (cycle-to-cycle variation of dynamic stall):
-  while the realization's periods split into clusters it goes on.
+  noise variance of the mean over P periods falls as 1/P (Pintelon & Schoukens 2012, §4.3.1);
+  once it is below the threshold a further period adds little that another realization would
+  not give too. While the realization's periods split into clusters (the cycle-to-cycle
+  variation of dynamic stall, clustering.py) it goes on.
 - **Realizations (finish the level, or add one)**, when a realization has ended:
   - BLA convergence: the total variance (noise and stochastic nonlinear distortions, over the
-    realizations) relative to |G|² is below ``total_db`` (§4.3.1, eq. 4-32);
+    realizations) relative to |G|² is below ``total_db`` (§4.3.1);
   - clustering: when the clustering splits the level's periods into regimes, its dominant
     cluster holds at least ``min_cluster_periods`` periods (a level in one regime has all its
     periods in it, and the variance rule judges them);
@@ -51,7 +52,7 @@ class AdaptiveRules:
     all). The noise threshold is one for every level. The total variance holds the stochastic
     nonlinear distortions too, which only more realizations average out (1/M), and at the high
     offset dynamic stall's cycle-to-cycle variation makes them large: the default campaign's
-    two realizations end near −13 dB there, the low level near −37 dB (docs/design.md §4.3).
+    two realizations end near −13 dB there, the low level near −37 dB (docs/design.md §7.9).
     At −20 dB the high level would take every realization the budget allows and still not
     converge, so its default is −10 dB and the period clustering decides there.
     """
@@ -150,7 +151,7 @@ def _excited(data: PeriodicData) -> tuple[np.ndarray, np.ndarray]:
 
 def noise_db(data: PeriodicData) -> float:
     """Relative noise variance (dB) of the FRF of one realization, the mean over its P >= 2
-    periods: the robust estimate with M = 1 (Pintelon & Schoukens 2012, eq. 4-31)."""
+    periods: the robust estimate with M = 1 (Pintelon & Schoukens 2012, §4.3.1)."""
     U, Y = _excited(data)
     Gp = Y[:, :, -1] / U[:, :, -1]
     G = Gp.mean(axis=1)

@@ -11,7 +11,7 @@ publishes ``/identification/model`` (JSON, latched) and ``/identification/status
 and the report (Table 1 Markdown/CSV, PNG figures) to ``output_dir`` and, with
 ``exit_after_final``, exits (the campaign's end).
 
-Adaptive runs (``adaptive``; docs/design.md §4.3): after each measured multisine period the
+Adaptive runs (``adaptive``; docs/design.md §7.9): after each measured multisine period the
 node judges the level's periods so far by the stop and extend rules (adaptive.py) and sends
 the generator a request on ``/experiment/control`` (end the realization, finish the level, add
 a realization, go on; multisine_gen.revision). It follows the plan's revisions on

@@ -15,7 +15,7 @@ is matched on both sides, so the first sample reaches every node and the recorde
 is not ready after ``start_timeout_s`` stops the generator with an error naming it and what it
 still waits for; nothing has moved then.
 
-Adaptive runs (docs/design.md §4.3): the generator takes the identifier's requests on
+Adaptive runs (docs/design.md §7.9): the generator takes the identifier's requests on
 ``/experiment/control`` (multisine_gen.revision: end the realization, finish the level, add a
 realization, go on) within ``adaptive_min_periods``, ``adaptive_min_realizations`` and
 ``adaptive_max_realizations``. A request it carries out becomes the plan's next revision, which

@@ -2,7 +2,7 @@
 
 The identifier judges each measured multisine period as it completes and sends the generator
 one request on ``/experiment/control`` (rig_runtime.interface.EXPERIMENT_CONTROL; the rules are
-aero_identification.adaptive, docs/design.md §4.3):
+aero_identification.adaptive, docs/design.md §7.9):
 
 - ``go_on``: play the plan as it stands;
 - ``end_realization``: the realization now streaming ends after the period now streaming
@@ -63,8 +63,9 @@ class Adaptation:
     """The generator's bounds on what an adaptive run may change (its parameters).
 
     min_periods: fewest measured periods of a realization; min_realizations: fewest
-    realizations of a level (2 keep the nonlinear distortions separable from the noise,
-    Pintelon & Schoukens 2012, §3.4); max_realizations: the most a level may grow to.
+    realizations of a level (2 keep the nonlinear distortions separable from the noise: the
+    robust BLA's total variance needs M >= 2, Pintelon & Schoukens 2012, §4.3.1);
+    max_realizations: the most a level may grow to.
     """
 
     min_periods: int = 2
@@ -177,7 +178,7 @@ def revise(
     lv = plan.levels[i]
     segments = _level_segments(plan, lv.level)
     where = f"level {lv.level} (offset {lv.offset_deg:g}°)"
-    if segments[-1].stop_k <= next_k:
+    if segments[-1].stop_k < next_k:  # a sample after its last period is out
         raise RefusedRequestError(f"{request.action}: {where} has ended")
     current = _streaming(plan, next_k)
     streaming = (

@@ -74,7 +74,7 @@ def add_parser(subparsers: Any) -> None:
         "--adaptive",
         action="store_true",
         help="let the identifier end realizations and levels that converged and add "
-        "realizations where they did not (identifier parameter adaptive; docs/design.md §4.3)",
+        "realizations where they did not (identifier parameter adaptive; docs/design.md §7.9)",
     )
     p.add_argument(
         "--allow-excluded",

@@ -1,0 +1,146 @@
+"""The experiment that steers itself (issue 23): adaptive against fixed default campaigns.
+
+For each plant seed, runs ``aero-rig campaign`` (default plan, the environment's backend) once
+with the fixed plan and once with ``--adaptive``, both with ``-p sim_wing.seed:=S -p
+sim_actuator.seed:=S``, and compares:
+
+- multisine time (settling and measured periods) executed against the fixed plan's, per level
+  and in total (models.json ``experiment``), and the measured periods of each realization;
+- Table 1 (all levels): each adaptive cell against the fixed run's, within the fixed cell's
+  spread (its ``± s``, the std over the sine's periods) or not, and the largest difference in
+  units of that spread;
+- the decisions the identifier took, and the wall time of each run.
+
+    .venv/bin/python bench/adaptive.py [--seeds 0 1 2] [--out DIR] [--reuse]
+                                       [--plan default] [-p NODE.PARAM:=VALUE ...]
+
+``--reuse`` reads the runs already in DIR (``fixed_<seed>``, ``adaptive_<seed>``) instead of
+running them again. ``-p`` is passed to both runs of every seed (e.g. ``-p
+generator.adaptive_min_periods:=3``). Last line: JSON {seed: {...}, "summary": {...}}.
+"""
+
+import argparse
+import csv
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+CLI = (sys.executable, "-m", "aero_rig.cli", "campaign")
+
+
+def run(out: Path, seed: int, adaptive: bool, plan: str, extra: list[str]) -> float:
+    """Run one campaign into ``out``; its wall time [s]. Raises on a failed run."""
+    args = [*CLI, "--plan", plan, "--quiet", "--out", str(out)]
+    args += ["-p", f"sim_wing.seed:={seed}", "-p", f"sim_actuator.seed:={seed}"]
+    for item in extra:
+        args += ["-p", item]
+    if adaptive:
+        args.append("--adaptive")
+    t0 = time.monotonic()
+    proc = subprocess.run(args, capture_output=True, text=True)
+    (out.parent / f"{out.name}.out").write_text(proc.stdout + proc.stderr)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{out.name}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+    return time.monotonic() - t0
+
+
+def table1(run_dir: Path) -> dict[tuple[str, str], tuple[float, float]]:
+    """{(model, column): (error, spread)} of table1_all_levels.csv."""
+    with (run_dir / "table1_all_levels.csv").open() as f:
+        rows = list(csv.reader(f))
+    header = rows[0]
+    cells = {}
+    for row in rows[1:]:
+        for i, name in enumerate(header):
+            if i == 0 or name.endswith(" std"):
+                continue
+            value = float(row[i]) if row[i] else math.nan
+            spread = float(row[i + 1]) if row[i + 1] else math.nan
+            cells[(row[0], name)] = (value, spread)
+    return cells
+
+
+def compare(fixed: Path, adaptive: Path) -> dict[str, Any]:
+    account = json.loads((adaptive / "models.json").read_text())["experiment"]
+    planned = json.loads((fixed / "models.json").read_text())["experiment"]
+    a, f = table1(adaptive), table1(fixed)
+    outside = []
+    worst = 0.0
+    for key, (value, _) in a.items():
+        ref, spread = f[key]
+        if not (math.isfinite(value) and math.isfinite(ref)):
+            continue
+        units = abs(value - ref) / spread if spread > 0 else math.inf
+        worst = max(worst, units)
+        if units > 1.0:
+            outside.append(f"{key[0]} {key[1]}: {value:.3f} vs {ref:.3f} ± {spread:.3f}")
+    return {
+        "multisine_s": account["multisine_executed_s"],
+        "fixed_multisine_s": planned["multisine_executed_s"],
+        "fraction": account["multisine_executed_s"] / planned["multisine_executed_s"],
+        "levels": {
+            name: {
+                "executed_s": lv["executed_s"],
+                "fixed_s": planned["levels"][name]["executed_s"],
+                "periods": lv["executed_periods"],
+            }
+            for name, lv in account["levels"].items()
+        },
+        "cells": len(a),
+        "cells_outside_spread": outside,
+        "worst_difference_in_spreads": round(worst, 2),
+        "decisions": [
+            f"{d.get('request')} level {d.get('level')}: {d.get('change') or d.get('why')}"
+            for d in account["decisions"]
+            if d.get("request") != "go_on"
+        ],
+        "table1_adaptive": {f"{m} | {c}": round(v, 3) for (m, c), (v, _) in a.items()},
+        "table1_fixed": {f"{m} | {c}": f"{v:.3f} ± {s:.3f}" for (m, c), (v, s) in f.items()},
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--out", default="runs/bench_adaptive")
+    parser.add_argument("--plan", default="default")
+    parser.add_argument("--reuse", action="store_true", help="read the runs already in --out")
+    parser.add_argument("-p", dest="params", action="append", default=[], metavar="NODE.P:=V")
+    args = parser.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    results: dict[str, Any] = {}
+    for seed in args.seeds:
+        walls = {}
+        for mode in ("fixed", "adaptive"):
+            run_dir = out / f"{mode}_{seed}"
+            if not args.reuse:
+                walls[mode] = round(run(run_dir, seed, mode == "adaptive", args.plan, args.params))
+        result = compare(out / f"fixed_{seed}", out / f"adaptive_{seed}")
+        result["wall_s"] = walls
+        results[str(seed)] = result
+        print(
+            f"seed {seed}: multisine {result['multisine_s']:.0f} s of "
+            f"{result['fixed_multisine_s']:.0f} s ({100 * result['fraction']:.0f} %); periods "
+            + ", ".join(f"{n} {lv['periods']}" for n, lv in result["levels"].items())
+            + f"; Table 1: {result['cells'] - len(result['cells_outside_spread'])} of "
+            f"{result['cells']} cells within the fixed run's spread (worst "
+            f"{result['worst_difference_in_spreads']} spreads)"
+        )
+        for line in result["cells_outside_spread"]:
+            print(f"  outside: {line}")
+    fractions = [r["fraction"] for r in results.values()]
+    results["summary"] = {
+        "max_fraction": round(max(fractions), 3),
+        "cells_outside_spread": sum(len(r["cells_outside_spread"]) for k, r in results.items()),
+    }
+    print(json.dumps(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,159 @@
+"""The generator node's handling of an adaptive run's requests (/experiment/control): a
+request it carries out becomes a published plan revision and a decision event; one it cannot,
+or a malformed message, is logged and recorded as refused and changes nothing; in simulation
+the stream holds at a measured period's end until that period's request, while a controller is
+matched."""
+
+import json
+import logging
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from multisine_gen.generator_node import PARAMETERS, Generator
+from multisine_gen.plan_format import read_plan_message
+from multisine_gen.revision import PlanRequest
+from rig_runtime.messages import new_message
+
+
+class _Endpoint:
+    def __init__(self) -> None:
+        self.sent: list[Any] = []
+        self.matched = 0
+
+    def publish(self, msg: Any) -> None:
+        self.sent.append(msg)
+
+    def subscription_count(self) -> int:
+        return 1
+
+    def publisher_count(self) -> int:
+        return self.matched
+
+
+class _Node:
+    """What Generator uses of rig_runtime.Node, recorded."""
+
+    backend_name = "dds"
+    fq_name = "/generator"
+
+    def __init__(self, **params: Any) -> None:
+        self.params = {p.name: p.default for p in PARAMETERS} | params
+        self.endpoints: dict[str, _Endpoint] = {}
+        self.logger = logging.getLogger("test_generator")
+
+    def create_publisher(self, type_name: str, topic: str, qos: str) -> _Endpoint:
+        return self.endpoints.setdefault(topic, _Endpoint())
+
+    def create_subscription(self, type_name: str, topic: str, *args: Any, **kw: Any) -> _Endpoint:
+        return self.endpoints.setdefault(f"sub {topic}", _Endpoint())
+
+    def create_timer(self, period_s: float, callback: Any) -> None:
+        return None
+
+    def new_message(self, type_name: str, **fields: Any) -> Any:
+        return new_message(type_name, **fields)
+
+
+def _started(**params: Any) -> tuple[Generator, _Node]:
+    node = _Node(plan="short", seed=5, flow_control=True, **params)
+    gen = Generator(node)  # type: ignore[arg-type]
+    gen.t0_ns = 10**18
+    gen.pacer.start(0.0)
+    return gen, node
+
+
+def _events(node: _Node) -> list[dict[str, Any]]:
+    return [json.loads(m.data) for m in node.endpoints["/experiment/segment"].sent]
+
+
+def _send(gen: Generator, request: PlanRequest | str) -> None:
+    text = request if isinstance(request, str) else request.to_json()
+    gen.on_control(SimpleNamespace(data=text))
+
+
+def _period(gen: Generator, level: int, realization: int, period: int) -> Any:
+    return next(
+        s
+        for s in gen.plan.segments
+        if s.kind == "multisine"
+        and (s.level, s.realization, s.period) == (level, realization, period)
+    )
+
+
+def test_a_request_carried_out_is_published_as_a_revision_with_its_decision() -> None:
+    gen, node = _started()
+    p1 = _period(gen, 0, 0, 1)
+    gen.k = p1.stop_k  # period 1 published in full: the stream is at its end
+    total = gen.total
+    _send(gen, PlanRequest("end_realization", 0, p1.stop_k - 1, "noise -31 dB"))
+    assert gen.plan.revision == 1 and gen.total == total - 2 * p1.length
+    plan, t0 = read_plan_message(node.endpoints["/experiment/plan"].sent[-1].data)
+    assert plan.revision == 1 and t0 == gen.t0_ns and plan.total_samples == gen.total
+    decision = _events(node)[-1]
+    assert decision["event"] == "decision" and decision["request"] == "end_realization"
+    assert decision["reason"] == "noise -31 dB" and decision["from_k"] == p1.stop_k
+    assert "2 measured periods instead of 4" in decision["change"]
+    assert json.loads(node.endpoints["/experiment/plan"].sent[-1].data)["adaptation"] == {
+        "min_periods": 2,
+        "min_realizations": 2,
+        "max_realizations": 4,
+    }
+
+
+@pytest.mark.parametrize(
+    ("request_text", "why"),
+    [
+        ('{"action": "end_realization", "level": 0, "after_k": 0, "reason": ""}', "has ended"),
+        ('{"action": "add_realization", "level": 9, "after_k": 0, "reason": ""}', "level 9"),
+        ('{"action": "finish_level", "level": 1, "after_k": -4}', "after_k must be >= 0"),
+        ('{"action": "explode", "level": 1, "after_k": 4}', "not one of"),
+        ("{oops", "not JSON"),
+    ],
+)
+def test_refused_and_malformed_requests_are_recorded_and_change_nothing(
+    request_text: str, why: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    gen, node = _started()
+    gen.k = _period(gen, 1, 0, 1).start_k + 3  # the high level streams
+    plan = gen.plan
+    with caplog.at_level(logging.WARNING, logger="test_generator"):
+        _send(gen, request_text)
+    assert gen.plan is plan and not node.endpoints["/experiment/plan"].sent
+    event = _events(node)[-1]
+    assert event["event"] == "refused" and why in event["why"]
+    assert why in caplog.text
+
+
+def test_a_request_beyond_the_budget_is_refused() -> None:
+    gen, node = _started(adaptive_max_realizations=2)
+    p = _period(gen, 1, 1, 3)
+    gen.k = p.stop_k
+    _send(gen, PlanRequest("add_realization", 1, p.stop_k - 1, "total variance -8 dB"))
+    assert gen.plan.revision == 0
+    assert "max_realizations 2" in _events(node)[-1]["why"]
+
+
+def test_the_stream_holds_at_a_period_end_until_its_request_while_a_controller_is_matched() -> None:
+    gen, node = _started()
+    p0 = _period(gen, 0, 0, 0)
+    control = node.endpoints["sub /experiment/control"]
+    assert not gen._holds(p0.stop_k)  # no controller: a fixed-plan run never holds
+    control.matched = 1
+    assert gen._holds(p0.stop_k)  # the period's last sample is out, its request is not in
+    assert not gen._holds(p0.stop_k - 5)  # inside a period: never
+    gen.k = p0.stop_k
+    _send(gen, PlanRequest("go_on", 0, p0.stop_k - 1, "1 of at least 2 periods"))
+    assert not gen._holds(p0.stop_k)
+    assert _events(node)[-1]["event"] == "decision" and gen.plan.revision == 0
+
+
+def test_a_realization_is_added_while_the_stream_holds_at_the_levels_last_period() -> None:
+    gen, node = _started()
+    p = _period(gen, 1, 1, 3)  # the high level's last period
+    gen.k = p.stop_k  # held at its end: nothing after the level is out yet
+    _send(gen, PlanRequest("add_realization", 1, p.stop_k - 1, "dominant cluster 6 < 8"))
+    assert gen.plan.revision == 1 and len(gen.plan.levels[1].realizations) == 3
+    assert gen.plan.segment_at(p.stop_k).kind == "settle"  # the new realization settles first
+    assert _events(node)[-1]["change"].endswith("realization 2 added (3 realizations, 4 periods)")
