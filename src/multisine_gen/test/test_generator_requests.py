@@ -155,5 +155,6 @@ def test_a_realization_is_added_while_the_stream_holds_at_the_levels_last_period
     gen.k = p.stop_k  # held at its end: nothing after the level is out yet
     _send(gen, PlanRequest("add_realization", 1, p.stop_k - 1, "dominant cluster 6 < 8"))
     assert gen.plan.revision == 1 and len(gen.plan.levels[1].realizations) == 3
-    assert gen.plan.segment_at(p.stop_k).kind == "settle"  # the new realization settles first
+    ramp = gen.plan.segment_at(p.stop_k)  # to the new realization, which settles first
+    assert ramp.kind == "ramp" and gen.plan.segment_at(ramp.stop_k).kind == "settle"
     assert _events(node)[-1]["change"].endswith("realization 2 added (3 realizations, 4 periods)")
