@@ -37,9 +37,10 @@ import numpy as np
 
 from rig_runtime.params import Parameter
 
-from .bla import estimate_bla
-from .clustering import period_clusters
 from .data import PeriodicData
+
+# bla.py (scipy) and clustering.py (scikit-learn) are imported where they are used: the
+# identifier node imports this module, and loads them only in an adaptive run.
 
 Action = Literal["go_on", "end_realization", "finish_level", "add_realization"]
 
@@ -164,6 +165,8 @@ def dominant_periods(data: PeriodicData) -> tuple[int, np.ndarray]:
     """Periods in the dominant cluster, and the (P, M) mask of them (all when too few)."""
     if data.P * data.M < 3:
         return data.P * data.M, np.ones((data.P, data.M), dtype=bool)
+    from .clustering import period_clusters
+
     result = period_clusters(data)
     return int(result.sizes[0]), result.keep
 
@@ -241,6 +244,8 @@ def judge_period(
                 "go_on", f"{done} realization(s): the floor is {bounds.min_realizations}"
             )
         return Verdict("go_on", "too few valid periods to judge the level")
+    from .bla import estimate_bla
+
     bla = estimate_bla(level_data, method="robust")
     figures["total_db"] = relative_variance_db(bla.var_total, bla.G)
     figures["noise_db"] = relative_variance_db(bla.var_noise, bla.G)

@@ -247,3 +247,16 @@ def test_config_module_stays_light() -> None:
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_the_identifier_node_leaves_the_numerical_stack_to_its_worker() -> None:
+    """The node (with the adaptive rules it imports) never loads scipy, scikit-learn or numba
+    unless an adaptive run judges a period: the worker fits."""
+    code = (
+        "import sys, aero_identification.identifier_node\n"
+        "heavy = ('scipy', 'numba', 'sklearn')\n"
+        "bad = sorted(m for m in sys.modules if m.split('.')[0] in heavy)\n"
+        "print(bad); sys.exit(1 if bad else 0)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr

@@ -285,7 +285,7 @@ class RigViewLogger:
         if stamp_key and isinstance(event.get(stamp_key), int | float):
             t_ns = round(event[stamp_key] * 1e9)
         self._set_time(t_ns)
-        level = "WARN" if edge == "plan_aborted" else "INFO"
+        level = "WARN" if edge in ("plan_aborted", "refused") else "INFO"
         self.rec.log(ENTITY["segment"], rr.TextLog(describe_segment(event), level=level))
 
     def on_status(self, msg: Any) -> None:
