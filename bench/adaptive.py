@@ -29,6 +29,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 CLI = (sys.executable, "-m", "aero_rig.cli", "campaign")
 
 
@@ -146,11 +148,33 @@ def main() -> int:
         baseline[f"fixed_{a} vs fixed_{b}"] = len(outside)
         print(f"fixed seed {a} against fixed seed {b}: {len(fa) - len(outside)} of {len(fa)} "
               "cells within the other's spread")  # fmt: skip
+    # Across the seeds: each cell's mean and run-to-run std (plant draws, the scan's pick),
+    # fixed against adaptive; "within" when the means differ by less than the fixed runs' std.
+    across: dict[str, Any] = {}
+    if len(seeds) >= 2:
+        fixed = [table1(out / f"fixed_{s}") for s in seeds]
+        adapt = [table1(out / f"adaptive_{s}") for s in seeds]
+        for key in fixed[0]:
+            f = np.array([t[key][0] for t in fixed])
+            a = np.array([t[key][0] for t in adapt])
+            across[f"{key[0]} | {key[1]}"] = {
+                "fixed": [round(float(f.mean()), 3), round(float(f.std(ddof=1)), 3)],
+                "adaptive": [round(float(a.mean()), 3), round(float(a.std(ddof=1)), 3)],
+                "within": bool(abs(a.mean() - f.mean()) <= f.std(ddof=1)),
+            }
+        inside = sum(v["within"] for v in across.values())
+        print(f"across seeds {seeds}: {inside} of {len(across)} cells' adaptive mean within "
+              "the fixed runs' run-to-run std of their mean")  # fmt: skip
+        for name, v in across.items():
+            mark = "" if v["within"] else "  (outside)"
+            print(f"  {name}: fixed {v['fixed'][0]} ± {v['fixed'][1]}, adaptive "
+                  f"{v['adaptive'][0]} ± {v['adaptive'][1]}{mark}")  # fmt: skip
     fractions = [r["fraction"] for r in results.values()]
     results["summary"] = {
         "max_fraction": round(max(fractions), 3),
         "cells_outside_spread": sum(len(r["cells_outside_spread"]) for r in results.values()),
         "fixed_against_fixed_outside_spread": baseline,
+        "across_seeds": across,
     }
     print(json.dumps(results))
     return 0
