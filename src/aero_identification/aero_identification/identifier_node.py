@@ -393,26 +393,35 @@ class Identifier:
         """Judge the level after one measured period and send the generator its request."""
         assert self.assembler is not None and self.control_pub is not None
         try:
-            verdict = self._verdict(level, realization, period)
+            verdicts = [self._verdict(level, realization, period)]
+            if verdicts[0].action == "end_realization":
+                # The realization ends here: the level's verdict too, on the same periods.
+                verdicts.append(self._verdict(level, realization, period, last=True))
         except Exception as exc:  # the rules must never leave the generator waiting
             detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
             self.node.logger.error("adaptive rules failed on level %d: %s", level, detail)
-            verdict = adaptive.Verdict("go_on", f"rules failed: {detail}")
-        request = PlanRequest(verdict.action, level, end_k, verdict.reason)
-        self.control_pub.publish(
-            self.node.new_message(EXPERIMENT_CONTROL.type, data=request.to_json())
-        )
-        log = self.node.logger.info if verdict.action == "go_on" else self.node.logger.warning
-        log(
-            "level %d realization %d period %d: %s (%s)",
-            level,
-            realization,
-            period,
-            verdict.action.replace("_", " "),
-            verdict.reason,
-        )
+            verdicts = [adaptive.Verdict("go_on", f"rules failed: {detail}")]
+        for i, verdict in enumerate(verdicts):
+            more = i < len(verdicts) - 1
+            request = PlanRequest(verdict.action, level, end_k, verdict.reason, more)
+            self.control_pub.publish(
+                self.node.new_message(EXPERIMENT_CONTROL.type, data=request.to_json())
+            )
+            log = self.node.logger.info if verdict.action == "go_on" else self.node.logger.warning
+            log(
+                "level %d realization %d period %d: %s (%s)",
+                level,
+                realization,
+                period,
+                verdict.action.replace("_", " "),
+                verdict.reason,
+            )
 
-    def _verdict(self, level: int, realization: int, period: int) -> adaptive.Verdict:
+    def _verdict(
+        self, level: int, realization: int, period: int, last: bool = False
+    ) -> adaptive.Verdict:
+        """The rules on the level's valid periods up to this one; ``last``: judge it as the
+        realization's last period (it ends here)."""
         assert self.assembler is not None
         asm = self.assembler
         plan_level = next(lv for lv in asm.plan.levels if lv.level == level)
@@ -440,7 +449,7 @@ class Identifier:
             current,
             level_data,
             periods_done=period + 1,
-            last_period=period == block.P - 1,
+            last_period=last or period == block.P - 1,
             realization=realization,
             planned_realizations=len(plan_level.realizations),
             rank=(offsets.index(plan_level.offset_deg), len(offsets)),

@@ -237,7 +237,8 @@ class Generator:
             )
             self._event(record | {"event": "refused", "why": why})
             return
-        self.judged.add(request.after_k)
+        if not request.more:
+            self.judged.add(request.after_k)  # the last request on that period
         late = self.k - 1 - request.after_k  # samples published past the judged period
         if request.action == "go_on":
             self._event(record | {"event": "decision", "change": ""})

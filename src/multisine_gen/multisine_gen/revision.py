@@ -91,13 +91,16 @@ class PlanRequest:
 
     action: one of ACTIONS; level: the plan level it concerns; after_k: the last plan sample
     of the period it judged (the generator may hold its stream there until the request
-    comes, aero-rig simulations); reason: why (logged and recorded with the decision).
+    comes, aero-rig simulations); reason: why (logged and recorded with the decision); more:
+    another request on the same period follows (a realization ended early, then the level's
+    verdict), so a generator holding there waits for it.
     """
 
     action: Action
     level: int
     after_k: int
     reason: str = ""
+    more: bool = False
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self))
@@ -126,7 +129,10 @@ def request_from_json(text: str) -> PlanRequest:
     reason = data.get("reason", "")
     if not isinstance(reason, str):
         raise RequestError(f"reason must be a string, got {reason!r}")
-    return PlanRequest(action, int(data["level"]), int(data["after_k"]), reason)
+    more = data.get("more", False)
+    if not isinstance(more, bool):
+        raise RequestError(f"more must be true or false, got {more!r}")
+    return PlanRequest(action, int(data["level"]), int(data["after_k"]), reason, more)
 
 
 @dataclass(frozen=True)

@@ -158,3 +158,16 @@ def test_a_realization_is_added_while_the_stream_holds_at_the_levels_last_period
     ramp = gen.plan.segment_at(p.stop_k)  # to the new realization, which settles first
     assert ramp.kind == "ramp" and gen.plan.segment_at(ramp.stop_k).kind == "settle"
     assert _events(node)[-1]["change"].endswith("realization 2 added (3 realizations, 4 periods)")
+
+
+def test_the_hold_waits_for_the_last_request_on_a_period() -> None:
+    gen, node = _started()
+    node.endpoints["sub /experiment/control"].matched = 1
+    p1 = _period(gen, 1, 1, 1)  # the high level's last realization, period 1
+    gen.k = p1.stop_k
+    assert gen._holds(p1.stop_k)
+    _send(gen, PlanRequest("end_realization", 1, p1.stop_k - 1, "noise -28 dB", more=True))
+    assert gen.plan.revision == 1 and gen._holds(p1.stop_k)  # the level's verdict follows
+    _send(gen, PlanRequest("add_realization", 1, p1.stop_k - 1, "total variance -6 dB"))
+    assert gen.plan.revision == 2 and not gen._holds(p1.stop_k)
+    assert next(lv for lv in gen.plan.levels if lv.level == 1).realization_periods == (4, 2, 4)

@@ -153,6 +153,7 @@ def test_a_revision_beyond_the_actuator_limits_is_refused(short: ExperimentPlan)
         ('{"action": "go_on", "level": 0, "after_k": -3}', "after_k must be >= 0"),
         ('{"action": "go_on", "level": "low", "after_k": 5}', "level must be an integer"),
         ('{"action": "go_on", "level": 0, "after_k": 5, "periods": 9}', "unknown field"),
+        ('{"action": "go_on", "level": 0, "after_k": 5, "more": "yes"}', "more must be"),
     ],
 )
 def test_malformed_control_messages_are_named(text: str, match: str) -> None:
