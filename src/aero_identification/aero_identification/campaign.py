@@ -231,9 +231,9 @@ class CampaignAssembler:
                 for _ in range(int(self.coverage[channel][k])):
                     self._store(channel, int(k), float(self.values[channel][k]))
             waiting, self.beyond[channel] = self.beyond[channel], {}
-            for k, value in sorted(waiting.items()):
+            for k_beyond, value in sorted(waiting.items()):
                 self.outside_plan[channel] -= 1  # counted again by add() if still outside
-                self.add(channel, self.t0_ns + round(k * self.period_ns), value)
+                self.add(channel, self.t0_ns + round(k_beyond * self.period_ns), value)
         self.anomalies = marks
         self._apply_marks()
 

@@ -5,7 +5,7 @@ a dominant cluster too small, a model still improving, and the floors."""
 import numpy as np
 import pytest
 
-from aero_identification.adaptive import AdaptiveRules, Bounds, judge_period
+from aero_identification.adaptive import AdaptiveRules, Bounds, Verdict, judge_period
 from aero_identification.data import PeriodicData
 
 N = 256
@@ -44,8 +44,8 @@ def _records(
     return PeriodicData(u, y, 1.0, LINES)
 
 
-def _judge(current: PeriodicData, level: PeriodicData | None, **kw: object):  # type: ignore[no-untyped-def]
-    args = {
+def _judge(current: PeriodicData, level: PeriodicData | None, **kw: object) -> Verdict:
+    args: dict[str, object] = {
         "periods_done": current.P,
         "last_period": False,
         "realization": 0,

@@ -123,7 +123,8 @@ def _read_bag(source: Path, path: Path) -> tuple[BagData | None, Exception | Non
             segment_conns = [c for c in reader.connections if c.topic == EXPERIMENT_SEGMENT.name]
             decisions: list[dict[str, Any]] = []
             for conn, _, raw in reader.messages(connections=segment_conns) if segment_conns else ():
-                event = json.loads(reader.deserialize(raw, conn.msgtype).data)
+                segment_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
+                event = json.loads(segment_msg.data)
                 if event.get("event") in ("decision", "refused"):
                     decisions.append(event)
             recorded_config = None

@@ -36,6 +36,7 @@ from rig_runtime.interface import ActuatorLimits
 
 __all__ = [
     "ACTIONS",
+    "Action",
     "Adaptation",
     "PlanRequest",
     "RefusedRequestError",

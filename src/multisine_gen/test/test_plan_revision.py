@@ -11,6 +11,7 @@ from multisine_gen.campaigns import build_plan, short_plan
 from multisine_gen.plan import ExperimentPlan, Segment
 from multisine_gen.plan_format import plan_from_json, plan_to_json
 from multisine_gen.revision import (
+    Action,
     Adaptation,
     PlanRequest,
     RefusedRequestError,
@@ -126,9 +127,10 @@ def test_requests_on_a_level_that_ended_or_is_not_streaming_are_refused(
     short: ExperimentPlan,
 ) -> None:
     p = _period(short, 1, 0, 1)  # the high level streams; the low one has ended
-    for action in ("end_realization", "finish_level", "add_realization"):
+    actions: tuple[Action, ...] = ("end_realization", "finish_level", "add_realization")
+    for action in actions:
         with pytest.raises(RefusedRequestError, match="has ended"):
-            revise(short, p.start_k + 1, PlanRequest(action, 0, p.start_k), BOUNDS)  # type: ignore[arg-type]
+            revise(short, p.start_k + 1, PlanRequest(action, 0, p.start_k), BOUNDS)
     early = _period(short, 0, 0, 1)  # the low level streams; the high one has not started
     with pytest.raises(RefusedRequestError, match="not streaming"):
         revise(short, early.start_k + 1, PlanRequest("end_realization", 1, 0), BOUNDS)
