@@ -12,8 +12,10 @@ estimates anyway; every threshold is a parameter (:class:`AdaptiveRules`).
   relative to |G|² and averaged over the excited lines, is below ``noise_db``. The robust BLA's
   noise variance of the mean over P periods falls as 1/P (Pintelon & Schoukens 2012, §4.3.1);
   once it is below the threshold a further period adds little that another realization would
-  not give too. While the realization's periods split into clusters (the cycle-to-cycle
-  variation of dynamic stall, clustering.py) it goes on.
+  not give too. Never below the valid periods of the level's earlier realizations: the
+  estimators take the same P from each, so the earlier ones' extra periods would be lost.
+  While the realization's periods split into clusters (the cycle-to-cycle variation of
+  dynamic stall, clustering.py) it goes on.
 - **Realizations (finish the level, or add one)**, when a realization has ended:
   - BLA convergence: the total variance (noise and stochastic nonlinear distortions, over the
     realizations) relative to |G|² is below ``total_db`` (§4.3.1);
@@ -197,6 +199,7 @@ def judge_period(
     rules: AdaptiveRules,
     bounds: Bounds,
     errors: list[float],
+    earlier_periods: int = 0,
 ) -> Verdict:
     """The verdict after a measured period of realization ``realization`` (0-based).
 
@@ -206,7 +209,8 @@ def judge_period(
     periods_done: measured periods of this realization so far; last_period: the plan ends the
     realization here; planned_realizations: realizations the plan has for the level now;
     errors: the level's BLA validation errors on its earlier newest realizations (this
-    function appends the newest when a realization ends).
+    function appends the newest when a realization ends); earlier_periods: the fewest valid
+    periods among the level's earlier realizations (0 for the first).
     """
     figures: dict[str, float] = {}
     noise_limit = rules.at(rules.noise_db, *rank)
@@ -214,6 +218,13 @@ def judge_period(
     if not last_period:
         if periods_done < bounds.min_periods or current.P < 2:
             return Verdict("go_on", f"{periods_done} of at least {bounds.min_periods} periods")
+        if current.P < earlier_periods:
+            # The nonparametric estimators take the same P from every realization
+            # (campaign_dataset): ending here would discard the earlier realizations' periods.
+            return Verdict(
+                "go_on",
+                f"{current.P} of the {earlier_periods} periods the earlier realizations have",
+            )
         figures["noise_db"] = noise_db(current)
         clusters, _ = dominant_periods(current)
         figures["cluster_periods"] = clusters

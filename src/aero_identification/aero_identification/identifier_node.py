@@ -456,6 +456,7 @@ class Identifier:
             rules=self.rules,
             bounds=self.bounds,
             errors=self.bla_errors.setdefault(level, []),
+            earlier_periods=min((len(c) for c in columns[:-1]), default=0),
         )
 
     def _start_refit(self, final: bool, reason: str) -> None:

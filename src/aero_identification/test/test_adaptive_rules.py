@@ -134,3 +134,10 @@ def test_never_below_the_floor_of_realizations() -> None:
 def test_thresholds_follow_the_levels_names(levels: int, rank: int, value: float) -> None:
     assert AdaptiveRules.at((-1.0, -2.0, -3.0), rank, levels) == value
     assert AdaptiveRules.at((-5.0,), rank, levels) == -5.0
+
+
+def test_a_realization_never_ends_below_the_periods_of_the_earlier_ones() -> None:
+    quiet = _records(3, 1, noise=0.001)
+    verdict = _judge(quiet, None, realization=1, earlier_periods=6)
+    assert verdict.action == "go_on" and "3 of the 6 periods" in verdict.reason
+    assert _judge(quiet, None, realization=1, earlier_periods=3).action == "end_realization"
