@@ -382,6 +382,11 @@ def experiment_lines(run_dir: Path) -> list[str]:
             f"  {name}: {level['executed_s']:.0f} s of {level['planned_s']:.0f} s, measured "
             f"periods {level['executed_periods']} (planned {level['planned_periods']})"
         )
+    for decision in account.get("decisions", []):
+        if decision.get("event") == "refused":
+            lines.append(f"  refused {decision.get('request')}: {decision.get('why')}")
+        elif decision.get("change"):
+            lines.append(f"  {decision['change']} ({decision.get('reason')})")
     return lines
 
 
