@@ -13,9 +13,11 @@ estimates anyway; every threshold is a parameter (:class:`AdaptiveRules`).
   noise variance of the mean over P periods falls as 1/P (Pintelon & Schoukens 2012, §4.3.1);
   once it is below the threshold a further period adds little that another realization would
   not give too. Never below the valid periods of the level's earlier realizations: the
-  estimators take the same P from each, so the earlier ones' extra periods would be lost.
-  While the realization's periods split into clusters (the cycle-to-cycle variation of
-  dynamic stall, clustering.py) it goes on.
+  estimators take the same P from each, so the earlier ones' extra periods would be lost; and
+  for the same reason never beyond them: once it has as many it ends, and the level's rule
+  below decides whether another realization is needed. Otherwise, while the realization's
+  periods split into clusters (the cycle-to-cycle variation of dynamic stall, clustering.py),
+  it goes on.
 - **Realizations (finish the level, or add one)**, when a realization has ended:
   - BLA convergence: the total variance (noise and stochastic nonlinear distortions, over the
     realizations) relative to |G|² is below ``total_db`` (§4.3.1);
@@ -228,6 +230,15 @@ def judge_period(
         figures["noise_db"] = noise_db(current)
         clusters, _ = dominant_periods(current)
         figures["cluster_periods"] = clusters
+        if 0 < earlier_periods <= current.P:
+            # Further periods would be discarded by the same equal-P rule: the level's
+            # realizations decide from here (another one if it has not converged).
+            return Verdict(
+                "end_realization",
+                f"{current.P} periods, as many as the earlier realizations have (noise "
+                f"{figures['noise_db']:.1f} dB of |G|²)",
+                figures,
+            )
         if figures["noise_db"] >= noise_limit:
             return Verdict(
                 "go_on",

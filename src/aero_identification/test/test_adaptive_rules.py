@@ -141,3 +141,9 @@ def test_a_realization_never_ends_below_the_periods_of_the_earlier_ones() -> Non
     verdict = _judge(quiet, None, realization=1, earlier_periods=6)
     assert verdict.action == "go_on" and "3 of the 6 periods" in verdict.reason
     assert _judge(quiet, None, realization=1, earlier_periods=3).action == "end_realization"
+
+
+def test_a_realization_ends_once_it_has_as_many_periods_as_the_earlier_ones() -> None:
+    noisy = _records(3, 1, noise=0.3)  # not converged, but more periods would be discarded
+    verdict = _judge(noisy, None, realization=1, earlier_periods=3)
+    assert verdict.action == "end_realization" and "as many as the earlier" in verdict.reason
