@@ -237,26 +237,27 @@ def test_parse_degrees() -> None:
         parse_degrees("1")
 
 
-def test_config_module_stays_light() -> None:
-    """The identifier node holds the config without loading the numerical stack."""
+def _loaded(module: str, heavy: tuple[str, ...]) -> subprocess.CompletedProcess[str]:
+    """Import ``module`` in a fresh interpreter; exit 1 (printing them) if any of ``heavy``
+    came with it."""
     code = (
-        "import sys, aero_identification.config\n"
-        "heavy = ('numpy', 'scipy', 'rclpy', 'cyclonedds', 'numba', 'sklearn')\n"
-        "bad = sorted(m for m in sys.modules if m.split('.')[0] in heavy)\n"
+        f"import sys, {module}\n"
+        f"bad = sorted(m for m in sys.modules if m.split('.')[0] in {heavy!r})\n"
         "print(bad); sys.exit(1 if bad else 0)\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+
+
+def test_config_module_stays_light() -> None:
+    """The identifier node holds the config without loading the numerical stack."""
+    result = _loaded(
+        "aero_identification.config", ("numpy", "scipy", "rclpy", "cyclonedds", "numba", "sklearn")
+    )
     assert result.returncode == 0, result.stdout + result.stderr
 
 
 def test_the_identifier_node_leaves_the_numerical_stack_to_its_worker() -> None:
     """The node (with the adaptive rules it imports) never loads scipy, scikit-learn or numba
     unless an adaptive run judges a period: the worker fits."""
-    code = (
-        "import sys, aero_identification.identifier_node\n"
-        "heavy = ('scipy', 'numba', 'sklearn')\n"
-        "bad = sorted(m for m in sys.modules if m.split('.')[0] in heavy)\n"
-        "print(bad); sys.exit(1 if bad else 0)\n"
-    )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    result = _loaded("aero_identification.identifier_node", ("scipy", "numba", "sklearn"))
     assert result.returncode == 0, result.stdout + result.stderr
