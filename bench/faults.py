@@ -21,6 +21,10 @@ rig_runtime.ros_environment.PARTICIPANT_LEASE_S: dds 10 s, rclpy 20 s):
   mid-run (once the identifier logs its first realization complete); for the recorder,
   ``recorder_gap`` says whether the bag's loss is named (exit 3, each topic that lost samples
   listed) or nothing was lost (a clean run), or else that it was silent;
+- ``lift_stopped``, ``generator_stopped``: that node stopped (SIGSTOP) mid-run and never
+  resumed (the campaign's own stop sends SIGCONT): the campaign must end at its stall bound
+  (lease + 2 status periods without stream progress), naming the stopped node;
+  ``fault_to_exit_s`` is the time from the stop to the campaign's exit;
 - ``killed_in_final``: kill -9 of the identifier's refit worker during the final
   identification (after the generator's "plan finished" and the identifier's "[final]" refit);
 - ``identifier_killed_in_final``: kill -9 of the identifier itself then.
@@ -236,6 +240,12 @@ def paused_for(seconds: float) -> Callable[[Any], str | None]:
     return fault
 
 
+def stopped_for_good(target: Any) -> str | None:
+    """SIGSTOP, never resumed by the bench; stamped so that the exit can be timed from it."""
+    target.suspend()
+    return f"stopped at {time.time():.3f} (never resumed)"
+
+
 def killed(target: Any) -> str | None:
     target.kill()
     return f"killed pid {target.pid}"
@@ -346,9 +356,11 @@ def recorder_gap(figures: dict[str, Any], text: str) -> str:
 
 def main() -> int:
     long_cases = [f"{n}_paused_long" for n in (*STREAM_NODES, "generator", "recorder")]
+    stopped_cases = ["lift_stopped", "generator_stopped"]
     all_cases = [
         *("starved", "paused", "recorder_late", "lift_killed", "never_ready", "frozen"),
-        *("identifier_paused", *long_cases, "killed_in_final", "identifier_killed_in_final"),
+        *("identifier_paused", *long_cases, *stopped_cases),
+        *("killed_in_final", "identifier_killed_in_final"),
     ]
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default=",".join(all_cases), help="comma-separated cases")
@@ -388,6 +400,10 @@ def main() -> int:
         else:
             figures["plan_end_to_exit_s"] = None  # the plan never finished
         figures["timed_out"] = "timeout after" in run.text
+        if run.fault and (match := re.match(r"stopped at (\d+\.\d+)", run.fault)):
+            if run.exited_at is not None:
+                figures["fault_to_exit_s"] = round(run.exited_at - float(match.group(1)), 1)
+            figures["stall_named"] = "stalled" in run.text and "stopped (SIGSTOP" in run.text
         if run.fault is not None:
             figures["fault"] = run.fault
         if name == "recorder_paused_long":
@@ -460,6 +476,10 @@ def main() -> int:
         if name in cases:
             node = name.removesuffix("_paused_long")
             run_case(name, after_first_realization(root / name, node, paused_for(long_pause)))
+    for name in stopped_cases:
+        if name in cases:
+            node = name.removesuffix("_stopped")
+            run_case(name, after_first_realization(root / name, node, stopped_for_good))
     if "killed_in_final" in cases:
         run_case("killed_in_final", kill_in_final(root / "killed_in_final", "refit_worker"))
     if "identifier_killed_in_final" in cases:

@@ -55,7 +55,6 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
     joint_position,
 )
-from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
 from . import adaptive, refit_worker
 from .campaign import CampaignAssembler
@@ -187,9 +186,9 @@ class Identifier:
             EXPERIMENT_ANOMALY.qos,
         )
         self.future_final = False
-        self.lease_s = PARTICIPANT_LEASE_S.get(node.backend_name, max(PARTICIPANT_LEASE_S.values()))
-        self.last_tick = time.monotonic()
-        self.stopped_s: list[float] = []  # how long this process did not run, past the lease
+        # A pause past the DDS lease (the node's pause watch, rig_runtime.node) is logged there
+        # and goes into the next status at once; the holes it leaves follow as gaps.
+        node.on_paused(lambda _seconds: self.publish_status())
         node.create_timer(TIMER_PERIOD_S, self.on_timer)
         node.create_timer(1.0, self.publish_status)
         self.publish_status()
@@ -352,23 +351,6 @@ class Identifier:
 
     # -- refits ---------------------------------------------------------------------------
     def on_timer(self) -> None:
-        now = time.monotonic()
-        stopped = now - self.last_tick - TIMER_PERIOD_S
-        self.last_tick = now
-        if stopped > self.lease_s:
-            # The intake did not run for longer than the DDS lease: the process was stopped
-            # (SIGSTOP, a debugger, a suspended laptop, swap), and its peers dropped it with
-            # what they had not delivered, or it was starved (nothing lost then).
-            self.stopped_s.append(stopped)
-            self.node.logger.warning(
-                "this node's intake did not run for %.1f s, past the DDS participant lease "
-                "(%g s): if the process was stopped, the samples published meanwhile are lost "
-                "for it (the gaps follow); the recorder's bag holds them, and the campaign "
-                "recovers the final identification from it",
-                stopped,
-                self.lease_s,
-            )
-            self.publish_status()
         if self.future is not None and self.future.done():
             self._collect()
         if self.to_judge and self.assembler is not None:
@@ -569,10 +551,9 @@ class Identifier:
             "pitch_samples": str(self.samples["u"]),
             "cl_samples": str(self.samples["y"]),
         }
-        if self.stopped_s:
-            values["stopped"] = (
-                f"{len(self.stopped_s)} time(s) past the DDS lease, last {self.stopped_s[-1]:.1f} s"
-            )
+        paused = self.node.paused_s
+        if paused:
+            values["stopped"] = f"{len(paused)} time(s) past the DDS lease, last {paused[-1]:.1f} s"
         for channel, name in (("u", "pitch"), ("y", "C_l")):
             gaps = self.gaps[channel]
             if gaps:
@@ -612,7 +593,7 @@ class Identifier:
             values["anomalies"] = "; ".join(quality["anomalies"])
         if quality.get("excluded_sines"):
             values["excluded sine records"] = "; ".join(quality["excluded_sines"])
-        gapped = any(self.gaps.values()) or bool(self.stopped_s)
+        gapped = any(self.gaps.values()) or bool(self.node.paused_s)
         level = 2 if self.errors else (1 if excluded or warnings or problems or gapped else 0)
         message = values["state"]
         msg = diagnostic_array(

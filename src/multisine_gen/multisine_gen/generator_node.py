@@ -28,6 +28,11 @@ on that period has come, so a simulated adaptive run is deterministic; the hold 
 when the controller is gone, or after the DDS participant lease, logged. On the rig the stream
 never holds: a request takes effect at the next period boundary after it arrives.
 
+Every second it publishes its progress on ``/diagnostics`` (name ``<node>: stream``): its state
+(``barrier``, ``streaming``, ``holding``, ``waiting for credit``, ``finished``), the samples
+published of the plan's total, and the credit's limit; the campaign's liveness follows it
+(aero_rig/cli/liveness.py).
+
 At the end of the plan it publishes a ``plan_end`` event and keeps the plan latched until
 stopped; stopped early, it publishes ``plan_aborted`` and the actuator's watchdog holds and then
 ramps to the safe angle.
@@ -41,7 +46,9 @@ from typing import Any
 
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
 from rig_runtime.barrier import ReadinessReport, StartBarrier
+from rig_runtime.diagnostics import OK, WARN, diagnostic_array
 from rig_runtime.interface import (
+    DIAGNOSTICS,
     EXPERIMENT_CONTROL,
     EXPERIMENT_PLAN,
     EXPERIMENT_SEGMENT,
@@ -51,7 +58,7 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
     ActuatorLimits,
 )
-from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
+from rig_runtime.ros_environment import participant_lease_s
 
 from .campaigns import default_plan, short_plan
 from .pacing import StreamPacer
@@ -128,6 +135,9 @@ def load_plan(spec: str, seed: int) -> ExperimentPlan:
     return plan_from_json(path.read_text())
 
 
+DIAGNOSTICS_PERIOD_S = 1.0  # the progress heartbeat on /diagnostics
+
+
 class Generator:
     def __init__(self, node: Node) -> None:
         self.node = node
@@ -150,7 +160,7 @@ class Generator:
         # holds now, and since when.
         self.judged: set[int] = set()
         self.hold_since: float | None = None
-        self.hold_s = PARTICIPANT_LEASE_S.get(node.backend_name, max(PARTICIPANT_LEASE_S.values()))
+        self.hold_s = participant_lease_s(node.backend_name)
         self.cmd_pub = node.create_publisher(
             PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )
@@ -191,7 +201,9 @@ class Generator:
             self.on_control,
             EXPERIMENT_CONTROL.qos,
         )
+        self.diag_pub = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name, DIAGNOSTICS.qos)
         node.create_timer(0.002, self.tick)
+        node.create_timer(DIAGNOSTICS_PERIOD_S, self.publish_diagnostics)
         node.logger.info(
             "plan %s: %d samples (%.1f s at %g Hz), %d segments",
             p["plan"],
@@ -413,6 +425,35 @@ class Generator:
             )
             if p["exit_at_end"]:
                 self.node.request_shutdown(0)
+
+    def stream_state(self) -> str:
+        """Where the stream stands: what the campaign's liveness and ``ros2 topic echo`` see."""
+        if self.finished:
+            return "finished"
+        if self.t0_ns is None:
+            return "barrier"
+        if self.hold_since is not None:
+            return "holding"
+        if self.pacer.flow_control and self.k >= self.pacer.k_seen + 1 + self.pacer.max_lead:
+            return "waiting for credit"
+        return "streaming"
+
+    def publish_diagnostics(self) -> None:
+        state = self.stream_state()
+        values = {
+            "state": state,
+            "samples_published": self.k,
+            "plan_samples": self.total,
+            "plan_revision": self.plan.revision,
+        }
+        if self.pacer.flow_control:
+            values["credit_until"] = self.pacer.k_seen + 1 + self.pacer.max_lead
+        level = WARN if state == "waiting for credit" else OK
+        self.diag_pub.publish(
+            diagnostic_array(
+                self.node, f"{self.node.name}: stream", level, state, "generator", values
+            )
+        )
 
     def close(self) -> None:
         if self.t0_ns is not None and not self.finished:

@@ -11,6 +11,9 @@
   campaign), else to the launcher's stderr with a ``[node]`` prefix on every line, as
   ``ros2 launch`` shows it. A node with ``stops_graph: true`` stops the graph when it exits.
 - ``--duration S`` stops the graph after S seconds (exit 0 if every node stopped cleanly).
+- A node whose process is stopped (SIGSTOP, Ctrl-Z on its group, a debugger) is named once it
+  has been stopped for longer than the DDS participant lease, past which its peers drop it
+  with what they had not delivered; and again when it runs on (docs/design.md §3.10).
 """
 
 import argparse
@@ -29,7 +32,7 @@ from typing import Any
 
 from .graph import BACKENDS, GraphError, GraphSpec, NodeSpec, entry_point, load_graph
 from .node import LAUNCHER_PID_ENV
-from .ros_environment import BACKEND_ENV
+from .ros_environment import BACKEND_ENV, backend_name, participant_lease_s
 
 
 @dataclass
@@ -54,6 +57,18 @@ class NodeProcess:
         with self.log_path.open("rb") as f:
             f.seek(max(0, f.seek(0, os.SEEK_END) - 16384))
             return f.read().decode(errors="replace").splitlines()[-50:]
+
+    def is_stopped(self) -> bool:
+        """Whether the process is stopped: SIGSTOP, job control or a debugger (psutil)."""
+        import psutil
+
+        try:
+            return psutil.Process(self.process.pid).status() in (
+                psutil.STATUS_STOPPED,
+                psutil.STATUS_TRACING_STOP,
+            )
+        except psutil.Error:
+            return False
 
     def error_line(self) -> str | None:
         """The node's own last error: a [FATAL]/[ERROR] log line or a traceback's last line."""
@@ -120,6 +135,8 @@ class Launcher:
         self.grace_s = grace_s
         self.processes: list[NodeProcess] = []
         self.failure: str | None = None
+        self.failed_node: str | None = None  # the node whose exit is the failure
+        self.stopped_since: dict[str, float] = {}  # node: monotonic time it was seen stopped
         self._logs: list[Any] = []
 
     def start(self) -> None:
@@ -170,6 +187,7 @@ class Launcher:
             if code is None:
                 continue
             if code != 0:
+                self.failed_node = proc.spec.name
                 self.failure = f"node {proc.spec.name!r} exited with code {code}"
                 line = proc.error_line()
                 if line:
@@ -180,6 +198,22 @@ class Launcher:
         if self.processes and all(p.returncode is not None for p in self.processes):
             return "all nodes finished"
         return None
+
+    def lease_s(self) -> float:
+        """The longest DDS participant lease among the graph's nodes' backends."""
+        default = backend_name(dict(self.env))
+        return max(
+            participant_lease_s(self.backends.get(s.name) or s.backend or default)
+            for s in self.graph.nodes
+        )
+
+    def stopped(self, now: float | None = None) -> dict[str, float]:
+        """{node: seconds it has been stopped} for the nodes whose process is stopped now
+        (first seen at one of these calls: call it about once a second)."""
+        now = time.monotonic() if now is None else now
+        stopped = {p.spec.name for p in self.processes if p.is_stopped()}
+        self.stopped_since = {n: self.stopped_since.get(n, now) for n in stopped}
+        return {n: now - since for n, since in self.stopped_since.items()}
 
     def running(self) -> list[str]:
         return [p.spec.name for p in self.processes if p.returncode is None]
@@ -197,6 +231,8 @@ class Launcher:
             for p in alive:
                 try:
                     os.kill(p.process.pid, sig)
+                    # A stopped node (SIGSTOP, job control) handles its stop only once it runs.
+                    os.kill(p.process.pid, signal.SIGCONT)
                 except ProcessLookupError:
                     pass
             deadline = time.monotonic() + wait_s
@@ -224,9 +260,15 @@ class Launcher:
         try:
             self.start()
             deadline = None if duration_s is None else time.monotonic() + duration_s
+            lease_s = self.lease_s()
+            reported: dict[str, float] = {}  # stopped nodes named, and how long they were
+            checked = 0.0
             reason = None
             while reason is None and not stop_reason:
                 reason = self.poll()
+                if time.monotonic() - checked >= 1.0:
+                    checked = time.monotonic()
+                    self._report_stopped(lease_s, reported)
                 if deadline is not None and time.monotonic() >= deadline:
                     reason = f"duration {duration_s:g} s reached"
                 time.sleep(0.05)
@@ -244,6 +286,25 @@ class Launcher:
             _log(f"error: nodes did not stop cleanly: {bad}")
             return 1
         return 0
+
+    def _report_stopped(
+        self, lease_s: float, reported: dict[str, float], now: float | None = None
+    ) -> None:
+        """Name a node stopped past the DDS lease, once, and again when it runs on."""
+        stopped = self.stopped(now)
+        for name, seconds in stopped.items():
+            reported_s = reported.get(name)
+            if seconds > lease_s and reported_s is None:
+                reported[name] = seconds
+                _log(
+                    f"warning: node {name!r} has been stopped (SIGSTOP, job control or a "
+                    f"debugger) for {seconds:.0f} s, past the DDS participant lease "
+                    f"({lease_s:g} s): its peers have dropped it with what they had not "
+                    "delivered to it"
+                )
+        for name in [n for n in reported if n not in stopped]:
+            del reported[name]
+            _log(f"node {name!r} runs again (it was stopped for longer than the lease)")
 
 
 def _log(text: str) -> None:

@@ -39,6 +39,7 @@ BACKEND_ENV = ros_environment.BACKEND_ENV
 # Set by the launcher for its nodes: a node whose parent process is no longer the launcher
 # (it was killed, even with SIGKILL) stops instead of running on unattended.
 LAUNCHER_PID_ENV = "RIG_LAUNCHER_PID"
+PAUSE_WATCH_S = 1.0  # the period of every node's pause watch (start_pause_watch)
 
 # Exit codes: 0 ok, 2 configuration error (bad parameters/arguments), 1 runtime failure.
 EXIT_CONFIG_ERROR = 2
@@ -170,6 +171,10 @@ class Node:
         self._last_report = ""
         self._last_signature: object = None
         self._anomalies: AnomalyLog | None = None
+        # Pauses past the DDS lease (start_pause_watch): how long this process did not run.
+        self.paused_s: list[float] = []
+        self._on_paused: list[Callable[[float], None]] = []
+        self._last_watch = 0.0
 
     @property
     def backend_name(self) -> str:
@@ -291,6 +296,41 @@ class Node:
         if text != self._last_report:
             self._last_report = text
             self._ready_pub.publish(self.new_message(GRAPH_READY.type, data=text))
+
+    # -- pauses past the DDS lease (docs/design.md §3.10) ---------------------------------
+    def start_pause_watch(self) -> None:
+        """Notice, on the first timer tick after it runs again, that this process did not run
+        for longer than the DDS participant lease (SIGSTOP, a debugger, a suspended laptop, a
+        swap storm): its peers have then dropped it, and reliable writers with it what they had
+        not delivered. Logged at once, kept in ``paused_s``, passed to ``on_paused`` callbacks;
+        the holes it leaves show as each node's own gap or time-discontinuity checks when the
+        next sample arrives. run_node starts it for every graph node."""
+        if self._last_watch:
+            return
+        self._last_watch = time.monotonic()
+        self.create_timer(PAUSE_WATCH_S, self._watch_pause)
+
+    def on_paused(self, callback: Callable[[float], None]) -> None:
+        """``callback(seconds)`` after this process did not run for longer than the lease."""
+        self._on_paused.append(callback)
+
+    def _watch_pause(self) -> None:
+        now = time.monotonic()
+        stopped = now - self._last_watch - PAUSE_WATCH_S
+        self._last_watch = now
+        lease_s = ros_environment.participant_lease_s(self.backend_name)
+        if stopped <= lease_s:
+            return
+        self.paused_s.append(stopped)
+        self.logger.warning(
+            "this process did not run for %.1f s, past the DDS participant lease (%g s): its "
+            "peers dropped it, and the samples they published meanwhile are lost for it unless "
+            "the recorder's bag holds them",
+            stopped,
+            lease_s,
+        )
+        for callback in self._on_paused:
+            callback(stopped)
 
     # -- anomalies (anomaly.py) ------------------------------------------------------------
     @property
@@ -458,6 +498,7 @@ def run_node(
         if callable(close):
             node.on_shutdown(close)
         node.start_readiness()
+        node.start_pause_watch()
         node.logger.info("running on %s", node.backend_description)
         profile_dir = os.environ.get("RIG_PROFILE_DIR")
         if profile_dir:  # cProfile of the spin loop, for `python -m pstats DIR/<node>.prof`

@@ -32,6 +32,13 @@ MAX_DOMAIN_ID = 232
 # fastdds_profiles.xml leave it). After that a reliable writer drops the reader and what it
 # did not deliver; the campaign's liveness bound is derived from it (aero_rig/cli/liveness.py).
 PARTICIPANT_LEASE_S = {"dds": 10.0, "rclpy": 20.0}
+
+
+def participant_lease_s(backend: str | None) -> float:
+    """The participant lease of a backend's DDS; the longest when it is not known."""
+    return PARTICIPANT_LEASE_S.get(backend or "", max(PARTICIPANT_LEASE_S.values()))
+
+
 INSTALL_RCLPY = 'pip install "ros-jazzy-rclpy[fastrtps]" ros-jazzy-common-interfaces'
 
 

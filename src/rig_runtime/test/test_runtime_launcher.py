@@ -1,5 +1,6 @@
 """The launcher runs a graph as processes, stops all on a crash, and leaves nothing behind."""
 
+import dataclasses
 import json
 import os
 import signal
@@ -184,3 +185,44 @@ def test_nodes_stop_when_the_launcher_is_killed(tmp_path: Path) -> None:
                 pass
     # The listener shut down cleanly (its summary is written on shutdown).
     assert json.loads((tmp_path / "listener.json").read_text())["received"] > 0
+
+
+def test_a_stopped_node_is_named_past_the_lease_and_still_stops_cleanly(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A node stopped by SIGSTOP: seen stopped, named once past the lease and again when it
+    runs on; the graph's stop resumes a stopped node so that it handles its SIGINT."""
+    from rig_runtime.launcher import Launcher
+
+    result = tmp_path / "listener.json"
+    graph = load_graph(_graph(tmp_path, 0, result))
+    graph = dataclasses.replace(graph, nodes=(graph.node("listener"),))
+    launcher = Launcher(graph, env=graph_env(), grace_s=10.0)
+    launcher.start()
+    try:
+        listener = launcher.processes[0].process
+        tail = launcher.processes[0].tail
+        assert tail is not None and wait_for(lambda: any("running on" in x for x in tail), 30)
+        assert launcher.stopped() == {}
+        os.kill(listener.pid, signal.SIGSTOP)
+        assert wait_for(lambda: launcher.stopped() != {}, 10)
+        t0 = launcher.stopped_since["listener"]
+        reported: dict[str, float] = {}
+        launcher._report_stopped(10.0, reported, now=t0 + 9.0)
+        assert "has been stopped" not in capsys.readouterr().err  # within the lease
+        launcher._report_stopped(10.0, reported, now=t0 + 11.0)
+        err = capsys.readouterr().err
+        assert "node 'listener' has been stopped" in err and "for 11 s" in err
+        launcher._report_stopped(10.0, reported, now=t0 + 12.0)
+        assert "has been stopped" not in capsys.readouterr().err  # once
+        os.kill(listener.pid, signal.SIGCONT)
+        assert wait_for(lambda: launcher.stopped() == {}, 10)
+        launcher._report_stopped(10.0, reported)
+        assert "node 'listener' runs again" in capsys.readouterr().err
+        os.kill(listener.pid, signal.SIGSTOP)
+        assert wait_for(lambda: launcher.stopped() != {}, 10)
+    finally:
+        codes = launcher.stop()
+    # resumed by the stop, it handled SIGINT itself
+    assert codes["listener"] == 0, (codes, capsys.readouterr().err)
+    assert result.exists()  # and wrote its summary on the way out

@@ -52,7 +52,8 @@ class Outcome:
     wall: float  # wall seconds from start to stop
     total: int  # plan samples (0: the plan was never seen)
     fs: float  # the plan's sample rate [Hz]
-    stalled: str | None = None  # the identifier stalled after the plan's end (liveness.py)
+    stalled: str | None = None  # the identifier or the stream stalled (liveness.py)
+    plan_ended: bool = False  # the generator said the plan ended (plan_end on the segments)
 
 
 def add_parser(subparsers: Any) -> None:
@@ -116,6 +117,17 @@ def main(args: argparse.Namespace) -> int:
         recovered = recover_from_bag(run_dir, launcher, outcome.stalled)
         if recovered is None:
             launcher.failure = outcome.stalled
+    elif launcher.failed_node == "identifier" and outcome.plan_ended:
+        # The identifier died after the plan's end (in its final identification): the graph
+        # was stopped, and the recorder closed a bag that holds the whole plan, or says what
+        # it lacks (then a fit would only repeat the loss: the failure stands).
+        short = bag_problems(run_dir / "bag", outcome.total) if outcome.total else ["no plan"]
+        if short:
+            print(f"aero-rig: the bag lacks samples ({short[0]}): no recovery", file=sys.stderr)
+        else:
+            recovered = recover_from_bag(run_dir, launcher, launcher.failure or "")
+            if recovered is not None:
+                launcher.failure = None
     elif not launcher.failure and (missed := samples_missed(run_dir)):
         # The identifier finished without samples the recorder may hold (it was paused past
         # the DDS lease, which dropped it as a reader): the bag decides, unless it is short of
@@ -194,6 +206,7 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
     previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGHUP)}
     launcher.start()
     reason: str | None = None
+    checked, stopped = 0.0, {}
     progress = tqdm(total=1, unit="sample", unit_scale=True, desc="experiment", disable=quiet)
     try:
         while reason is None:
@@ -205,11 +218,13 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
             progress.refresh()
             reason = launcher.poll()
             now = time.monotonic()
-            note = monitor.liveness.silent_mid_run(now)
+            if now - checked >= 1.0:  # the processes' states: once a second (psutil)
+                checked, stopped = now, launcher.stopped(now)
+            note = monitor.liveness.silent_mid_run(now, stopped)
             if note:
                 progress.write(f"aero-rig: warning: {note}", file=sys.stderr)
             if reason is None:
-                stalled = monitor.liveness.check(now)
+                stalled = monitor.liveness.check(now, stopped)
                 reason = stalled
             if timeout and time.monotonic() - started > timeout:
                 reason = f"timeout after {timeout:g} s"
@@ -228,7 +243,15 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
         codes = launcher.stop()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    return Outcome(reason, codes, time.monotonic() - started, monitor.total, monitor.fs, stalled)
+    return Outcome(
+        reason,
+        codes,
+        time.monotonic() - started,
+        monitor.total,
+        monitor.fs,
+        stalled,
+        plan_ended=monitor.liveness.plan_end_at is not None,
+    )
 
 
 def recover_from_bag(run_dir: Path, launcher: Launcher, stalled: str) -> dict[str, Any] | None:
@@ -308,7 +331,9 @@ def summarise(
         return EXIT_FAILED
     problems = run_problems(run_dir, outcome.total)
     # seconds from the plan's own sample rate (/experiment/plan), never an assumed one
-    experiment_s = outcome.total / outcome.fs if outcome.total and outcome.fs else None
+    experiment_s = None  # a plan stopped short (a stall) has no real-time factor
+    if outcome.total and outcome.fs and outcome.plan_ended:
+        experiment_s = outcome.total / outcome.fs
     summary = {
         "wall_s": round(outcome.wall, 1),
         "backend": backend,
@@ -354,10 +379,13 @@ def print_results(run_dir: Path, summary: dict[str, Any], bad: dict[str, int]) -
         print("\n".join(x for x in clustering.read_text().splitlines() if x.startswith("|")))
     for line in experiment_lines(run_dir):
         print(line)
-    print(
-        f"\nwall time {summary['wall_s']} s for {summary['experiment_s']} s of experiment "
-        f"({summary['real_time_factor']}x real time)"
-    )
+    if summary["experiment_s"]:
+        print(
+            f"\nwall time {summary['wall_s']} s for {summary['experiment_s']} s of experiment "
+            f"({summary['real_time_factor']}x real time)"
+        )
+    else:
+        print(f"\nwall time {summary['wall_s']} s; the plan did not run to its end")
     print(f"run directory: {run_dir}  (bag/, models.json, table1_*.md|csv, *.png, logs/)")
     if bad:
         print(f"aero-rig: warning: nodes stopped uncleanly: {bad}", file=sys.stderr)

@@ -1,29 +1,47 @@
 """Progress liveness of a campaign: no silent wait for ever (docs/design.md §3.10).
 
 The campaign's observer (`monitor.CampaignMonitor`) feeds `Liveness` with what the graph says
-about itself: the end of the plan (the generator's ``plan_end`` on ``/experiment/segment``) and
-the identifier's status heartbeat (``/identification/status``, once a second, with its state and
-the plan samples it holds on each channel). After the plan has ended, the identifier must move
-on: hold more samples, start or finish its final identification, or keep its heartbeat while
-it refits. A bound without news ends the wait, naming what stalled and on what.
+about itself: the generator's stream heartbeat (``/diagnostics``, once a second: its state and
+the samples it has published), the end of the plan (its ``plan_end`` on
+``/experiment/segment``), the identifier's status heartbeat (``/identification/status``, once a
+second, with its state and the plan samples it holds on each channel), and the launcher's view
+of the node processes (which are stopped: SIGSTOP, job control, a debugger).
 
-The bound comes from the graph's own clocks, not a guess: the DDS participant lease (a writer
-drops a reader silent for that long, with what it did not deliver: ros_environment
-.PARTICIPANT_LEASE_S) plus two status periods. Before the plan's end a silent identifier is
-only reported (once): the generator streams on, and the recorder keeps what the identifier
-misses; the campaign then recovers the identification from the bag (campaign.py).
+- **While the plan streams,** the generator must publish: a stream that stands still for the
+  bound (the generator paused or hung, or waiting for a credit that a paused stream node never
+  returns) is a stall. Its own heartbeat counts, not the identifier's samples: once the
+  commands stop, the actuator's watchdog runs on in real time, and its states would look like
+  progress. Past the lease the run cannot be whole any more: the writers have dropped the
+  silent reader with what they had not delivered. A silent identifier is only reported
+  (once): the generator streams on, and the recorder keeps what the identifier misses.
+- **After the plan's end,** the identifier must move on: hold more samples, start or finish
+  its final identification, or keep its heartbeat while it refits.
+
+At the bound the wait ends, naming what stalled and on what (and any node process that is
+stopped). The bound comes from the graph's own clocks, not a guess: the DDS participant lease
+(ros_environment.PARTICIPANT_LEASE_S) plus two status periods. It also covers the generator's
+longest legitimate stand-still, the adaptive hold at a period's end, which the lease bounds
+(generator_node.py). The campaign then recovers the identification from the bag (campaign.py).
 """
 
 from dataclasses import dataclass, field
 
-from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
+from rig_runtime.ros_environment import participant_lease_s
 
 STATUS_PERIOD_S = 1.0  # the identifier's status timer (identifier_node.py)
 
 
 def stall_bound_s(backend: str) -> float:
-    """Seconds without progress after the plan's end that count as a stall."""
-    return PARTICIPANT_LEASE_S.get(backend, max(PARTICIPANT_LEASE_S.values())) + 2 * STATUS_PERIOD_S
+    """Seconds without progress that count as a stall."""
+    return participant_lease_s(backend) + 2 * STATUS_PERIOD_S
+
+
+def stopped_note(stopped: dict[str, float]) -> str:
+    """'; stopped: lift (14 s), …' for the node processes that are stopped now, else ''."""
+    if not stopped:
+        return ""
+    names = ", ".join(f"{name} ({seconds:.0f} s)" for name, seconds in sorted(stopped.items()))
+    return f"; node process(es) stopped (SIGSTOP, job control or a debugger): {names}"
 
 
 @dataclass
@@ -32,12 +50,21 @@ class Liveness:
 
     bound_s: float
     total: int = 0  # plan samples
+    plan_at: float | None = None  # when the plan was first seen (t0: the barrier is passed)
     plan_end_at: float | None = None  # when the generator said the plan ended
     status_at: float | None = None  # the identifier's last heartbeat
     state: str = ""
     samples: tuple[int, int] = (0, 0)  # plan samples it holds: pitch, C_l
     progress_at: float | None = None  # when its state or sample counts last changed
+    stream_at: float | None = None  # the generator's last heartbeat
+    stream_state: str = ""
+    published: int = 0  # samples the generator has published
+    published_at: float | None = None  # when that count last changed
     warned: set[str] = field(default_factory=set)
+
+    def plan_seen(self, now: float) -> None:
+        if self.plan_at is None:
+            self.plan_at = now
 
     def plan_ended(self, now: float) -> None:
         if self.plan_end_at is None:
@@ -48,7 +75,13 @@ class Liveness:
             self.progress_at = now
         self.status_at, self.state, self.samples = now, state, samples
 
-    def silent_mid_run(self, now: float) -> str | None:
+    def stream(self, now: float, state: str, published: int) -> None:
+        """The generator's heartbeat: its state and the samples it has published."""
+        if published != self.published or self.published_at is None:
+            self.published_at = now
+        self.stream_at, self.stream_state, self.published = now, state, published
+
+    def silent_mid_run(self, now: float, stopped: dict[str, float] | None = None) -> str | None:
         """A one-time note while the plan streams and the identifier is silent past the bound."""
         if self.plan_end_at is not None or self.status_at is None or "silent" in self.warned:
             return None
@@ -57,13 +90,19 @@ class Liveness:
         self.warned.add("silent")
         return (
             f"identifier silent for {now - self.status_at:.0f} s (paused, starved or hung); "
-            "the plan streams on and the bag keeps what it misses"
+            "the plan streams on and the bag keeps what it misses" + stopped_note(stopped or {})
         )
 
-    def check(self, now: float) -> str | None:
-        """None while the run may go on; after the plan's end, what stalled and on what."""
-        if self.plan_end_at is None or self.state == "done":
+    def check(self, now: float, stopped: dict[str, float] | None = None) -> str | None:
+        """None while the run may go on; else what stalled and on what."""
+        reason = self._stalled(now)
+        return None if reason is None else reason + stopped_note(stopped or {})
+
+    def _stalled(self, now: float) -> str | None:
+        if self.state == "done":
             return None
+        if self.plan_end_at is None:
+            return self._stream_stalled(now)
         since_end = now - self.plan_end_at
         if since_end <= self.bound_s:
             return None
@@ -92,3 +131,31 @@ class Liveness:
                 "/experiment/segment for the plan's end (lost past the DDS lease)"
             )
         return None
+
+    def _stream_stalled(self, now: float) -> str | None:
+        """Before the plan's end: the generator's stream stands still (or it fell silent)."""
+        if self.plan_at is None or self.published_at is None or self.stream_at is None:
+            return None  # no stream yet (the start barrier), or no heartbeat to judge by
+        still = now - max(self.published_at, self.plan_at)
+        if still <= self.bound_s:
+            return None
+        if now - self.stream_at > self.bound_s:
+            what = (
+                f"the generator is silent: its last heartbeat came {now - self.stream_at:.0f} s "
+                f"ago, after {self.published} of {self.total} samples (paused, hung or gone)"
+            )
+        else:
+            what = (
+                f"the generator has published no sample for {still:.0f} s, standing at "
+                f"{self.published} of {self.total} ({self.stream_state})"
+            )
+            if self.stream_state == "waiting for credit":
+                what += (
+                    "; it waits for /wing/coefficients, which the actuator, the wing and the "
+                    "lift return"
+                )
+        pitch, cl = self.samples
+        return (
+            f"stream stalled before the plan's end: {what} (bound {self.bound_s:g} s: DDS lease "
+            f"+ 2 status periods); the identifier holds {pitch} pitch and {cl} C_l samples"
+        )

@@ -6,7 +6,12 @@ from typing import Any
 
 from multisine_gen.plan import PlanError
 from multisine_gen.plan_format import read_plan_message
-from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, IDENTIFICATION_STATUS
+from rig_runtime.interface import (
+    DIAGNOSTICS,
+    EXPERIMENT_PLAN,
+    EXPERIMENT_SEGMENT,
+    IDENTIFICATION_STATUS,
+)
 
 from .liveness import Liveness, stall_bound_s
 
@@ -38,6 +43,22 @@ class CampaignMonitor:
             IDENTIFICATION_STATUS.qos,
         )
 
+        self.node.create_subscription(
+            DIAGNOSTICS.type, DIAGNOSTICS.name, self._diagnostics, DIAGNOSTICS.qos, depth=100
+        )
+
+    def _diagnostics(self, msg: Any) -> None:
+        """The generator's stream heartbeat (generator_node.publish_diagnostics)."""
+        for status in msg.status:
+            if status.hardware_id != "generator":
+                continue
+            values = {kv.key: kv.value for kv in status.values}
+            try:
+                published = int(values.get("samples_published", ""))
+            except ValueError:
+                continue
+            self.liveness.stream(time.monotonic(), values.get("state", ""), published)
+
     def _plan(self, msg: Any) -> None:
         try:
             plan, _ = read_plan_message(msg.data)
@@ -49,6 +70,7 @@ class CampaignMonitor:
         self.total = plan.total_samples
         self.fs = plan.fs
         self.liveness.total = plan.total_samples
+        self.liveness.plan_seen(time.monotonic())
 
     def _segment(self, msg: Any) -> None:
         event = json.loads(msg.data)
