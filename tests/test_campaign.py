@@ -7,6 +7,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -355,6 +356,74 @@ def test_identifier_paused_past_the_lease_is_recovered_from_the_bag(
     reference = campaign[0]
     for name in ("table1_all_levels.md", "table1_level1.md", "table1_no_clustering.md"):
         assert (run / name).read_bytes() == (reference / name).read_bytes(), name
+
+
+@pytest.mark.timeout(600)
+def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_it(
+    tmp_path: Path,
+) -> None:
+    """The lift stopped (SIGSTOP) mid-run and never resumed: the generator's credit stops, the
+    campaign ends at its stall bound (lease + 2 status periods, not its timeout), names the
+    stall and the stopped process, fits what the bag holds and exits 3; no process is left
+    (the stop resumes the stopped node so that it handles its SIGINT)."""
+    backend = graph_env()["RIG_RUNTIME_BACKEND"]
+    run = tmp_path / "run"
+    proc = start_session(
+        [*CLI, "campaign", "--plan", "short", "--out", str(run), "--quiet", *TIMEOUT_600],
+        graph_env(),
+    )
+    try:
+        log = run / "logs" / "identifier.log"
+        assert wait_for(lambda: log.exists() and "realization 0 complete" in log.read_text(), 300)
+        target = node_process(proc.pid, "lift")
+        assert target is not None
+        children = descendants(proc.pid)
+        target.suspend()
+        stopped_at = time.monotonic()
+        out, err = finish(proc, 300)
+        ended_after = time.monotonic() - stopped_at
+    finally:
+        if proc.poll() is None:
+            finish(proc, 60)
+    assert proc.returncode == 3, out[-3000:] + err[-3000:]
+    bound = PARTICIPANT_LEASE_S[backend] + 2.0
+    assert "stream stalled before the plan's end" in err and "timeout after" not in err
+    assert re.search(r"stopped \(SIGSTOP, job control or a debugger\): lift \(\d+ s\)", err), err
+    assert bound <= ended_after, ended_after  # never before the bound (the bench times the rest)
+    summary = json.loads((run / "campaign.json").read_text())
+    assert summary["recovered_from_bag"] and not summary["clean"]
+    assert "the plan did not run to its end" in out
+    assert all(process_gone(c) for c in children)
+
+
+@pytest.mark.timeout(600)
+def test_identifier_killed_in_its_final_identification_is_recovered_from_the_bag(
+    campaign, tmp_path: Path
+) -> None:
+    """kill -9 of the identifier after the plan's end, once its final refit has started: the
+    graph stops, the bag holds the whole plan, so the campaign runs the final identification
+    from it: exit 0, Table 1 byte-identical to the idle run, the recovery and its reason said."""
+    run = tmp_path / "run"
+    proc = start_session(
+        [*CLI, "campaign", "--plan", "short", *WING, "--out", str(run), "--quiet", *TIMEOUT_600],
+        graph_env(),
+    )
+    try:
+        log = run / "logs" / "identifier.log"
+        assert wait_for(lambda: log.exists() and "[final]" in log.read_text(), 300)
+        target = node_process(proc.pid, "identifier")
+        assert target is not None
+        target.kill()
+    finally:
+        out, err = finish(proc, 600)
+    assert proc.returncode == 0, out[-3000:] + err[-3000:]
+    assert "node 'identifier' exited with code -9" in out + err
+    assert "final identification recovered from the bag" in out, out[-3000:]
+    summary = json.loads((run / "campaign.json").read_text())
+    assert summary["recovered_from_bag"]["clean"] and summary["clean"]
+    assert summary["exit_codes"]["identifier"] == -9
+    for name in ("table1_all_levels.md", "table1_level1.md", "table1_no_clustering.md"):
+        assert (run / name).read_bytes() == (campaign[0] / name).read_bytes(), name
 
 
 def test_fit_of_bag_without_needed_topics_names_them(tmp_path: Path) -> None:

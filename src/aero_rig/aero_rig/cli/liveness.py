@@ -142,7 +142,7 @@ class Liveness:
         if now - self.stream_at > self.bound_s:
             what = (
                 f"the generator is silent: its last heartbeat came {now - self.stream_at:.0f} s "
-                f"ago, after {self.published} of {self.total} samples (paused, hung or gone)"
+                f"ago, at {self.published} of {self.total} samples published (paused, hung or gone)"
             )
         else:
             what = (
