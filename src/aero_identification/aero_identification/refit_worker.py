@@ -58,10 +58,14 @@ def _reset_peak_rss() -> None:
 def exit_with_parent(poll_s: float = 0.5) -> None:
     """Worker initializer: leave when the identifier node is gone, even if it was killed with
     SIGKILL (a ProcessPoolExecutor worker would otherwise wait on its queue forever, holding
-    hundreds of MB)."""
+    hundreds of MB). A terminal's Ctrl-C (SIGINT to the whole process group, as under
+    ``ros2 launch``) is the node's to handle: the worker ignores it, and leaves when the node
+    shuts its pool down or is gone, instead of dying with a KeyboardInterrupt traceback."""
     import os
+    import signal
     import threading
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent = os.getppid()
 
     def watch() -> None:
