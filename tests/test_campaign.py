@@ -165,7 +165,7 @@ def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
     with AnyReader([run / "bag"]) as reader:
         topics = {c.topic for c in reader.connections}
         # /experiment/control has a writer only in an adaptive run (its own test checks it);
-        # the DDS backend's recorder learns a topic's type from its writers.
+        # the recorder learns a topic's type and QoS from its writers (both backends).
         assert {t.name for t in RECORDED_TOPICS} - {EXPERIMENT_CONTROL.name} <= topics
         conns = [
             c

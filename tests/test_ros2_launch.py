@@ -215,4 +215,5 @@ def test_rig_launch_starts_the_hardware_nodes_against_the_simulated_devices(
     counts = bag_topic_counts(run_dir / "bag")
     for topic in ("/pitch/command", "/pitch/state", "/pressure/taps"):
         assert counts.get(topic, 0) >= 300, (topic, counts)
-    assert counts.get("/wing/coefficients", 0) >= 100, counts
+    lift = [line for line in out.splitlines() if "[lift" in line or "[scanner" in line]
+    assert counts.get("/wing/coefficients", 0) >= 100, (counts, lift[-30:])

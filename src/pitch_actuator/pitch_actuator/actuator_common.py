@@ -84,14 +84,29 @@ class CommandTracking:
     lasts until a command is followed again; command stamps that go backwards or skip samples
     are a ``time_discontinuity``. The node passes every command with its stamp, the commanded
     and the applied angle.
+
+    On the rig the governor's rate budget accrues with wall time, and DDS may deliver commands
+    in a burst, microseconds apart: a command within the limits that the rate limit alone held
+    back (``catch_up=True``) is judged at the next ``settle`` (the node's next control tick or
+    command), by whether the setpoint has reached it by then.
     """
 
     def __init__(self, node: Node, fs: float | None = None) -> None:
         self.anomalies = node.anomalies
         self.period_ns = None if fs is None else round(1e9 / fs)
         self.last_stamp_ns: int | None = None
+        self.pending: tuple[int, float] | None = None  # (stamp, commanded) to judge at settle
 
-    def command(self, stamp_ns: int, commanded_deg: float, applied_deg: float) -> None:
+    def settle(self, setpoint_deg: float) -> None:
+        """Judge the command held back by the rate limit with the setpoint reached since."""
+        if self.pending is not None:
+            stamp_ns, commanded_deg = self.pending
+            self.pending = None
+            self._judge(stamp_ns, commanded_deg, setpoint_deg)
+
+    def command(
+        self, stamp_ns: int, commanded_deg: float, applied_deg: float, catch_up: bool = False
+    ) -> None:
         last = self.last_stamp_ns
         if last is not None and self.period_ns is not None:
             step = stamp_ns - last
@@ -104,6 +119,13 @@ class CommandTracking:
                     f"({step / self.period_ns:+.2f} samples)",
                 )
         self.last_stamp_ns = stamp_ns if last is None else max(last, stamp_ns)
+        self.settle(applied_deg)  # a command still pending: the setpoint has moved on since
+        if catch_up and abs(applied_deg - commanded_deg) > TRACKING_TOLERANCE_DEG:
+            self.pending = (stamp_ns, commanded_deg)
+            return
+        self._judge(stamp_ns, commanded_deg, applied_deg)
+
+    def _judge(self, stamp_ns: int, commanded_deg: float, applied_deg: float) -> None:
         followed = math.isfinite(commanded_deg) and (
             abs(applied_deg - commanded_deg) <= TRACKING_TOLERANCE_DEG
         )

@@ -30,7 +30,7 @@ from .actuator_common import (
 )
 from .controller_link import ControllerLink, ControllerLinkConfig
 from .controller_protocol import Feedback, Status
-from .safety import SafetyGovernor
+from .safety import GovernorMode, SafetyGovernor
 
 PARAMETERS = [
     *LIMIT_PARAMETERS,
@@ -111,8 +111,19 @@ class HwActuator:
 
     def on_command(self, msg: Any) -> None:
         commanded_deg = math.degrees(command_position(msg))
+        # A command still pending is judged by the setpoint reached so far (not advanced here:
+        # the time since the last tick is the new command's rate budget).
+        self.tracking.settle(self.governor.setpoint_deg)
         setpoint_deg = self.governor.command(self._now(), commanded_deg)
-        self.tracking.command(stamp_to_ns(msg.header.stamp), commanded_deg, setpoint_deg)
+        # Within the limits and tracking, only the rate limit can hold a command back: over
+        # wall time, for commands delivered in a burst. It is judged at the next control tick.
+        catch_up = (
+            self.limits.min_deg <= commanded_deg <= self.limits.max_deg
+            and self.governor.mode is GovernorMode.TRACKING
+        )
+        self.tracking.command(
+            stamp_to_ns(msg.header.stamp), commanded_deg, setpoint_deg, catch_up=catch_up
+        )
         self._send(setpoint_deg)
 
     def on_stop(self, msg: Any) -> None:
@@ -123,7 +134,9 @@ class HwActuator:
 
     def on_timer(self) -> None:
         # Watchdog and ramp advance with time even when commands stop.
-        self._send(self.governor.update(self._now()))
+        setpoint_deg = self.governor.update(self._now())
+        self._send(setpoint_deg)
+        self.tracking.settle(setpoint_deg)
         if self.governor.counters.watchdog_trips > self.trips:
             self.trips = self.governor.counters.watchdog_trips
             self.tracking.watchdog_tripped("no pitch command within the watchdog timeout")

@@ -96,3 +96,21 @@ def test_watchdog_episode_ends_with_the_next_followed_command() -> None:
     tracking.command(905_000_000, 6.0, 6.0)
     watchdog = [a for a in sent if a.kind == "watchdog"]
     assert (watchdog[-1].first_ns, watchdog[-1].last_ns) == (1_000, 905_000_000)
+
+
+def test_a_command_the_rate_limit_held_back_is_judged_at_the_next_tick() -> None:
+    """The rig: commands delivered in a burst arrive microseconds apart, and the wall-clock
+    rate budget holds them back for a tick. Reached by the next settle: followed; not reached
+    (held, stopped, too far): one not_tracking episode at the command's own stamp."""
+    tracking, sent = _tracking(None)
+    tracking.command(0, 1.00, 0.99, catch_up=True)  # held back by microseconds of budget
+    assert sent == [] and tracking.pending == (0, 1.00)
+    tracking.settle(1.00)  # reached at the next control tick
+    assert sent == [] and tracking.pending is None
+    tracking.command(5_000_000, 2.00, 1.50, catch_up=True)
+    tracking.settle(1.80)  # still short at the next tick
+    assert [(a.kind, a.first_ns, a.last_ns) for a in sent] == [("not_tracking", 5_000_000, None)]
+    tracking.command(10_000_000, 2.10, 2.10, catch_up=True)  # followed at once: episode ends
+    assert (sent[-1].first_ns, sent[-1].last_ns) == (5_000_000, 5_000_000)
+    tracking.command(15_000_000, 40.0, 35.0)  # clamped: judged at once, never deferred
+    assert sent[-1].kind == "not_tracking" and sent[-1].first_ns == 15_000_000

@@ -483,7 +483,12 @@ def run_node(
         print(f"[FATAL] [{name}]: {exc}", file=sys.stderr)
         return EXIT_CONFIG_ERROR
 
+    signalled: list[int] = []
+
     def _stop(signum: int, _frame: Any) -> None:
+        if signalled:  # a terminal's Ctrl-C and ros2 launch both send SIGINT: one stop
+            return
+        signalled.append(signum)
         node.logger.info("received %s, shutting down", signal.Signals(signum).name)
         node.request_shutdown()
 
@@ -516,5 +521,7 @@ def run_node(
     finally:
         node.close()
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            # Stopped by a signal, the process is on its way out: a second SIGINT (Ctrl-C in
+            # the terminal's process group, then ros2 launch's own) must not kill it now.
+            signal.signal(sig, signal.SIG_IGN if signalled else handler)
     return node.exit_code

@@ -425,7 +425,10 @@ class RclpyBackend:
         return writers + readers
 
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
-        """Topics with their type and the QoS offered by their first publisher."""
+        """Topics with at least one publisher, with their type and the QoS offered by the
+        first (as the DDS backend's): a topic known only from its readers has no offered QoS
+        yet, and a recorder that guessed one could ask for reliable from a best-effort
+        writer and never be matched."""
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 
         result: dict[str, tuple[str, QosProfile | None]] = {}
@@ -441,7 +444,8 @@ class RclpyBackend:
                     0 if q.history == HistoryPolicy.KEEP_ALL else int(q.depth),
                 )
                 break
-            result[name] = (types[0], profile)
+            if profile is not None:
+                result[name] = (types[0], profile)
         return result
 
     def close(self) -> None:

@@ -192,3 +192,37 @@ def test_rclpy_requested_but_missing_names_the_install_command(
         ros_environment.check(dict(os.environ))
     monkeypatch.delenv("RIG_RUNTIME_BACKEND")
     assert ros_environment.backend_name(dict(os.environ)) == "dds"
+
+
+def test_a_topic_known_only_from_its_readers_has_no_type_for_the_recorder_yet(
+    rclpy_env: None,
+) -> None:
+    """The recorder subscribes with the QoS its writers offer. A topic with only a reader so
+    far is not offered yet: a guessed reliable reader would never match a best-effort writer
+    that comes later (the rig's lift and scanner publish best effort)."""
+    from rig_runtime.qos import QosProfile
+
+    reader = Node("identifier", argv=[])
+    recorder = Node("recorder", argv=[])
+    writer: Node | None = None
+    try:
+        reader.create_subscription(
+            "std_msgs/msg/Float64", "/wing/lift_probe", lambda m: None, "default"
+        )
+        assert recorder.spin_until(
+            lambda: "/wing/lift_probe" in dict(recorder._backend.node.get_topic_names_and_types()),  # type: ignore[attr-defined]
+            10.0,
+        )
+        assert "/wing/lift_probe" not in recorder.topic_types()
+        writer = Node("lift", argv=[])
+        writer.create_publisher(
+            "std_msgs/msg/Float64", "/wing/lift_probe", QosProfile("best_effort", "volatile", 5)
+        )
+        assert recorder.spin_until(lambda: "/wing/lift_probe" in recorder.topic_types(), 10.0)
+        type_name, offered = recorder.topic_types()["/wing/lift_probe"]
+        assert type_name == "std_msgs/msg/Float64"
+        assert offered is not None and offered.reliability == "best_effort"
+    finally:
+        for node in (reader, recorder, writer):
+            if node is not None:
+                node.close()
