@@ -217,3 +217,14 @@ def test_rig_launch_starts_the_hardware_nodes_against_the_simulated_devices(
         assert counts.get(topic, 0) >= 300, (topic, counts)
     lift = [line for line in out.splitlines() if "[lift" in line or "[scanner" in line]
     assert counts.get("/wing/coefficients", 0) >= 100, (counts, lift[-30:])
+    # The plan's commands are followed: no command held back by the wall-clock rate budget
+    # (DDS delivers commands in bursts) is reported as not tracked.
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([run_dir / "bag"]) as reader:
+        conns = [c for c in reader.connections if c.topic == "/experiment/anomaly"]
+        kinds = [
+            json.loads(reader.deserialize(raw, c.msgtype).data)["kind"]  # type: ignore[attr-defined]
+            for c, _, raw in reader.messages(connections=conns)
+        ]
+    assert "not_tracking" not in kinds, kinds

@@ -87,22 +87,26 @@ class CommandTracking:
 
     On the rig the governor's rate budget accrues with wall time, and DDS may deliver commands
     in a burst, microseconds apart: a command within the limits that the rate limit alone held
-    back (``catch_up=True``) is judged at the next ``settle`` (the node's next control tick or
-    command), by whether the setpoint has reached it by then.
+    back (``catch_up=True``) waits for the node's next control tick (``settle``). The commands
+    waiting then are followed when the setpoint has reached the newest of them (the controller
+    only ever applies the newest setpoint), or when a later command is followed at once;
+    otherwise each is ``not_tracking`` at its own stamp.
     """
 
     def __init__(self, node: Node, fs: float | None = None) -> None:
         self.anomalies = node.anomalies
         self.period_ns = None if fs is None else round(1e9 / fs)
         self.last_stamp_ns: int | None = None
-        self.pending: tuple[int, float] | None = None  # (stamp, commanded) to judge at settle
+        self.pending: list[tuple[int, float]] = []  # (stamp, commanded) held back since a tick
 
-    def settle(self, setpoint_deg: float) -> None:
-        """Judge the command held back by the rate limit with the setpoint reached since."""
-        if self.pending is not None:
-            stamp_ns, commanded_deg = self.pending
-            self.pending = None
-            self._judge(stamp_ns, commanded_deg, setpoint_deg)
+    def settle(self, setpoint_deg: float, caught_up: bool = False) -> None:
+        """At a control tick: judge the commands held back since the last one (``caught_up``:
+        a later command was followed at once, so the setpoint went past them)."""
+        pending, self.pending = self.pending, []
+        if pending and abs(setpoint_deg - pending[-1][1]) <= TRACKING_TOLERANCE_DEG:
+            caught_up = True  # reached the newest of them
+        for stamp_ns, commanded_deg in pending:
+            self._judge(stamp_ns, commanded_deg, commanded_deg if caught_up else setpoint_deg)
 
     def command(
         self, stamp_ns: int, commanded_deg: float, applied_deg: float, catch_up: bool = False
@@ -119,10 +123,12 @@ class CommandTracking:
                     f"({step / self.period_ns:+.2f} samples)",
                 )
         self.last_stamp_ns = stamp_ns if last is None else max(last, stamp_ns)
-        self.settle(applied_deg)  # a command still pending: the setpoint has moved on since
-        if catch_up and abs(applied_deg - commanded_deg) > TRACKING_TOLERANCE_DEG:
-            self.pending = (stamp_ns, commanded_deg)
+        followed_now = abs(applied_deg - commanded_deg) <= TRACKING_TOLERANCE_DEG
+        if catch_up and not followed_now:
+            self.pending.append((stamp_ns, commanded_deg))
             return
+        if self.pending:  # in stamp order: those held back first
+            self.settle(applied_deg, caught_up=followed_now)
         self._judge(stamp_ns, commanded_deg, applied_deg)
 
     def _judge(self, stamp_ns: int, commanded_deg: float, applied_deg: float) -> None:

@@ -111,9 +111,6 @@ class HwActuator:
 
     def on_command(self, msg: Any) -> None:
         commanded_deg = math.degrees(command_position(msg))
-        # A command still pending is judged by the setpoint reached so far (not advanced here:
-        # the time since the last tick is the new command's rate budget).
-        self.tracking.settle(self.governor.setpoint_deg)
         setpoint_deg = self.governor.command(self._now(), commanded_deg)
         # Within the limits and tracking, only the rate limit can hold a command back: over
         # wall time, for commands delivered in a burst. It is judged at the next control tick.

@@ -100,17 +100,22 @@ def test_watchdog_episode_ends_with_the_next_followed_command() -> None:
 
 def test_a_command_the_rate_limit_held_back_is_judged_at_the_next_tick() -> None:
     """The rig: commands delivered in a burst arrive microseconds apart, and the wall-clock
-    rate budget holds them back for a tick. Reached by the next settle: followed; not reached
-    (held, stopped, too far): one not_tracking episode at the command's own stamp."""
+    rate budget holds them back until the next control tick. Reached by then (the newest of
+    them), or a later command followed at once: followed. Not reached (held, stopped, too far):
+    each is not_tracking at its own stamp."""
     tracking, sent = _tracking(None)
     tracking.command(0, 1.00, 0.99, catch_up=True)  # held back by microseconds of budget
-    assert sent == [] and tracking.pending == (0, 1.00)
-    tracking.settle(1.00)  # reached at the next control tick
-    assert sent == [] and tracking.pending is None
-    tracking.command(5_000_000, 2.00, 1.50, catch_up=True)
-    tracking.settle(1.80)  # still short at the next tick
-    assert [(a.kind, a.first_ns, a.last_ns) for a in sent] == [("not_tracking", 5_000_000, None)]
-    tracking.command(10_000_000, 2.10, 2.10, catch_up=True)  # followed at once: episode ends
-    assert (sent[-1].first_ns, sent[-1].last_ns) == (5_000_000, 5_000_000)
-    tracking.command(15_000_000, 40.0, 35.0)  # clamped: judged at once, never deferred
-    assert sent[-1].kind == "not_tracking" and sent[-1].first_ns == 15_000_000
+    tracking.command(5_000_000, 1.05, 0.99, catch_up=True)  # the same burst
+    assert sent == [] and len(tracking.pending) == 2
+    tracking.settle(1.05)  # the next control tick reached the newest
+    assert sent == [] and tracking.pending == []
+    tracking.command(10_000_000, 1.10, 1.06, catch_up=True)
+    tracking.command(15_000_000, 1.15, 1.15, catch_up=True)  # followed at once: so was 1.10
+    assert sent == []
+    tracking.command(20_000_000, 2.00, 1.50, catch_up=True)
+    tracking.settle(1.80)  # still short at the next tick: a real rate limit
+    assert [(a.kind, a.first_ns, a.last_ns) for a in sent] == [("not_tracking", 20_000_000, None)]
+    tracking.command(25_000_000, 2.10, 2.10, catch_up=True)  # followed at once: episode ends
+    assert (sent[-1].first_ns, sent[-1].last_ns) == (20_000_000, 20_000_000)
+    tracking.command(30_000_000, 40.0, 35.0)  # clamped: judged at once, never held
+    assert sent[-1].kind == "not_tracking" and sent[-1].first_ns == 30_000_000
