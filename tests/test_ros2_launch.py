@@ -221,10 +221,10 @@ def test_rig_launch_starts_the_hardware_nodes_against_the_simulated_devices(
     # (DDS delivers commands in bursts) is reported as not tracked.
     from rosbags.highlevel import AnyReader
 
-    with AnyReader([run_dir / "bag"]) as reader:
-        conns = [c for c in reader.connections if c.topic == "/experiment/anomaly"]
+    with AnyReader([run_dir / "bag"]) as bag:
+        conns = [c for c in bag.connections if c.topic == "/experiment/anomaly"]
         kinds = [
-            json.loads(reader.deserialize(raw, c.msgtype).data)["kind"]  # type: ignore[attr-defined]
-            for c, _, raw in reader.messages(connections=conns)
+            json.loads(bag.deserialize(raw, c.msgtype).data)["kind"]  # type: ignore[attr-defined]
+            for c, _, raw in bag.messages(connections=conns)
         ]
     assert "not_tracking" not in kinds, kinds
