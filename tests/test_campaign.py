@@ -327,6 +327,37 @@ def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
     _assert_lossless_and_identical(run, campaign[0])
 
 
+def _campaign_with_fault(
+    run: Path, log: str, text: str, node: str, fault: Any, *extra: str
+) -> tuple[int, str, str]:
+    """The short campaign into ``run``; ``fault(process of node)`` once ``logs/<log>.log``
+    holds ``text``. Its exit code and output."""
+    proc = start_session(
+        [*CLI, "campaign", "--plan", "short", *extra, "--out", str(run), "--quiet", *TIMEOUT_600],
+        graph_env(),
+    )
+    try:
+        path = run / "logs" / f"{log}.log"
+        assert wait_for(lambda: path.exists() and text in path.read_text(), 300)
+        target = node_process(proc.pid, node)
+        assert target is not None
+        fault(target)
+    finally:
+        out, err = finish(proc, 600)
+    return proc.returncode, out, err
+
+
+def _assert_recovered_as_idle(run: Path, reference: Path, out: str) -> dict[str, Any]:
+    """The final identification recovered from a whole bag: Table 1 byte-identical to the idle
+    run's. campaign.json."""
+    assert "final identification recovered from the bag" in out, out[-3000:]
+    summary: dict[str, Any] = json.loads((run / "campaign.json").read_text())
+    assert summary["recovered_from_bag"]["clean"] and summary["clean"]
+    for name in ("table1_all_levels.md", "table1_level1.md", "table1_no_clustering.md"):
+        assert (run / name).read_bytes() == (reference / name).read_bytes(), name
+    return summary
+
+
 @pytest.mark.timeout(900)
 def test_identifier_paused_past_the_lease_is_recovered_from_the_bag(
     campaign, tmp_path: Path
@@ -337,25 +368,16 @@ def test_identifier_paused_past_the_lease_is_recovered_from_the_bag(
     recovered from the bag, exit 0, Table 1 byte-identical to the idle run (issue 21)."""
     backend = graph_env()["RIG_RUNTIME_BACKEND"]
     run = tmp_path / "run"
-    proc = start_session(
-        [*CLI, "campaign", "--plan", "short", *WING, "--out", str(run), "--quiet", *TIMEOUT_600],
-        graph_env(),
+    code, out, err = _campaign_with_fault(
+        run,
+        "generator",
+        "start barrier passed",
+        "identifier",
+        lambda target: pause(target, PARTICIPANT_LEASE_S[backend] + 5.0),
+        *WING,
     )
-    try:
-        log = run / "logs" / "generator.log"
-        assert wait_for(lambda: log.exists() and "start barrier passed" in log.read_text(), 120)
-        target = node_process(proc.pid, "identifier")
-        assert target is not None
-        pause(target, PARTICIPANT_LEASE_S[backend] + 5.0)
-    finally:
-        out, err = finish(proc, 600)
-    assert proc.returncode == 0, out[-3000:] + err[-3000:]
-    assert "final identification recovered from the bag" in out, out[-3000:]
-    summary = json.loads((run / "campaign.json").read_text())
-    assert summary["recovered_from_bag"]["clean"] and summary["clean"]
-    reference = campaign[0]
-    for name in ("table1_all_levels.md", "table1_level1.md", "table1_no_clustering.md"):
-        assert (run / name).read_bytes() == (reference / name).read_bytes(), name
+    assert code == 0, out[-3000:] + err[-3000:]
+    _assert_recovered_as_idle(run, campaign[0], out)
 
 
 @pytest.mark.timeout(600)
@@ -368,24 +390,18 @@ def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_i
     (the stop resumes the stopped node so that it handles its SIGINT)."""
     backend = graph_env()["RIG_RUNTIME_BACKEND"]
     run = tmp_path / "run"
-    proc = start_session(
-        [*CLI, "campaign", "--plan", "short", "--out", str(run), "--quiet", *TIMEOUT_600],
-        graph_env(),
-    )
-    try:
-        log = run / "logs" / "identifier.log"
-        assert wait_for(lambda: log.exists() and "realization 0 complete" in log.read_text(), 300)
-        target = node_process(proc.pid, "lift")
-        assert target is not None
-        children = descendants(proc.pid)
+    stopped: list[tuple[float, list[Any]]] = []
+
+    def stop_for_good(target: Any) -> None:
+        # the campaign's processes (the node's parent is the campaign): all gone at the end
+        stopped.append((time.monotonic(), descendants(target.ppid())))
         target.suspend()
-        stopped_at = time.monotonic()
-        out, err = finish(proc, 300)
-        ended_after = time.monotonic() - stopped_at
-    finally:
-        if proc.poll() is None:
-            finish(proc, 60)
-    assert proc.returncode == 3, out[-3000:] + err[-3000:]
+
+    code, out, err = _campaign_with_fault(
+        run, "identifier", "realization 0 complete", "lift", stop_for_good
+    )
+    ended_after = time.monotonic() - stopped[0][0]
+    assert code == 3, out[-3000:] + err[-3000:]
     bound = PARTICIPANT_LEASE_S[backend] + 2.0
     assert "stream stalled before the plan's end" in err and "timeout after" not in err
     assert re.search(r"stopped \(SIGSTOP, job control or a debugger\): lift \(\d+ s\)", err), err
@@ -393,7 +409,7 @@ def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_i
     summary = json.loads((run / "campaign.json").read_text())
     assert summary["recovered_from_bag"] and not summary["clean"]
     assert "the plan did not run to its end" in out
-    assert all(process_gone(c) for c in children)
+    assert all(process_gone(c) for c in stopped[0][1])
 
 
 @pytest.mark.timeout(600)
@@ -404,26 +420,13 @@ def test_identifier_killed_in_its_final_identification_is_recovered_from_the_bag
     graph stops, the bag holds the whole plan, so the campaign runs the final identification
     from it: exit 0, Table 1 byte-identical to the idle run, the recovery and its reason said."""
     run = tmp_path / "run"
-    proc = start_session(
-        [*CLI, "campaign", "--plan", "short", *WING, "--out", str(run), "--quiet", *TIMEOUT_600],
-        graph_env(),
+    code, out, err = _campaign_with_fault(
+        run, "identifier", "[final]", "identifier", lambda target: target.kill(), *WING
     )
-    try:
-        log = run / "logs" / "identifier.log"
-        assert wait_for(lambda: log.exists() and "[final]" in log.read_text(), 300)
-        target = node_process(proc.pid, "identifier")
-        assert target is not None
-        target.kill()
-    finally:
-        out, err = finish(proc, 600)
-    assert proc.returncode == 0, out[-3000:] + err[-3000:]
+    assert code == 0, out[-3000:] + err[-3000:]
     assert "node 'identifier' exited with code -9" in out + err
-    assert "final identification recovered from the bag" in out, out[-3000:]
-    summary = json.loads((run / "campaign.json").read_text())
-    assert summary["recovered_from_bag"]["clean"] and summary["clean"]
+    summary = _assert_recovered_as_idle(run, campaign[0], out)
     assert summary["exit_codes"]["identifier"] == -9
-    for name in ("table1_all_levels.md", "table1_level1.md", "table1_no_clustering.md"):
-        assert (run / name).read_bytes() == (campaign[0] / name).read_bytes(), name
 
 
 def test_fit_of_bag_without_needed_topics_names_them(tmp_path: Path) -> None:
