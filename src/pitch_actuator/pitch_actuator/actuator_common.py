@@ -87,15 +87,18 @@ class CommandTracking:
 
     On the rig the governor's rate budget accrues with wall time, and DDS may deliver commands
     in a burst, microseconds apart: a command within the limits that the rate limit alone held
-    back (``catch_up=True``) waits for the node's next control tick (``settle``). The commands
-    waiting then are followed when the setpoint has reached the newest of them (the controller
-    only ever applies the newest setpoint), or when a later command is followed at once;
-    otherwise each is ``not_tracking`` at its own stamp.
+    back (``catch_up=True``) waits for the node's next control tick (``settle``). A tick may
+    come microseconds after a command too, so the commands waiting then are followed when the
+    setpoint is within ``catch_up_deg`` of the newest of them (one tick's rate budget: the
+    setpoint moves toward it at the full rate), or when a later command is followed at once;
+    otherwise each is ``not_tracking`` at its own stamp. A stream the actuator cannot follow
+    (faster than its rate limit, or held after a trip) falls further behind and is reported.
     """
 
-    def __init__(self, node: Node, fs: float | None = None) -> None:
+    def __init__(self, node: Node, fs: float | None = None, catch_up_deg: float = 0.0) -> None:
         self.anomalies = node.anomalies
         self.period_ns = None if fs is None else round(1e9 / fs)
+        self.catch_up_deg = catch_up_deg
         self.last_stamp_ns: int | None = None
         self.pending: list[tuple[int, float]] = []  # (stamp, commanded) held back since a tick
 
@@ -103,8 +106,10 @@ class CommandTracking:
         """At a control tick: judge the commands held back since the last one (``caught_up``:
         a later command was followed at once, so the setpoint went past them)."""
         pending, self.pending = self.pending, []
-        if pending and abs(setpoint_deg - pending[-1][1]) <= TRACKING_TOLERANCE_DEG:
-            caught_up = True  # reached the newest of them
+        if pending and abs(setpoint_deg - pending[-1][1]) <= max(
+            self.catch_up_deg, TRACKING_TOLERANCE_DEG
+        ):
+            caught_up = True  # on its way to the newest at the full rate
         for stamp_ns, commanded_deg in pending:
             self._judge(stamp_ns, commanded_deg, commanded_deg if caught_up else setpoint_deg)
 

@@ -85,7 +85,11 @@ class HwActuator:
             PITCH_COMMAND.qos,
             required=True,
         )
-        self.tracking = CommandTracking(node)
+        # One control tick's rate budget: what a command arriving just before a tick can still
+        # lag by although the setpoint follows it at the full rate.
+        self.tracking = CommandTracking(
+            node, catch_up_deg=self.limits.max_rate_deg_s / p["update_rate_hz"]
+        )
         self.trips = 0
         node.set_ready(
             False,

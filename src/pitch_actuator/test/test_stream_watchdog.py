@@ -50,10 +50,12 @@ def test_steps_are_counted_bounded_and_reset_by_a_command() -> None:
     assert not wd.running_on and wd.command(41.1) is False
 
 
-def _tracking(fs: float | None = 200.0) -> tuple[CommandTracking, list[Anomaly]]:
+def _tracking(
+    fs: float | None = 200.0, catch_up_deg: float = 0.0
+) -> tuple[CommandTracking, list[Anomaly]]:
     sent: list[Anomaly] = []
     node = SimpleNamespace(anomalies=AnomalyLog("/sim_actuator", sent.append))
-    return CommandTracking(node, fs), sent  # type: ignore[arg-type]
+    return CommandTracking(node, fs, catch_up_deg), sent  # type: ignore[arg-type]
 
 
 def test_followed_commands_report_nothing() -> None:
@@ -100,22 +102,23 @@ def test_watchdog_episode_ends_with_the_next_followed_command() -> None:
 
 def test_a_command_the_rate_limit_held_back_is_judged_at_the_next_tick() -> None:
     """The rig: commands delivered in a burst arrive microseconds apart, and the wall-clock
-    rate budget holds them back until the next control tick. Reached by then (the newest of
-    them), or a later command followed at once: followed. Not reached (held, stopped, too far):
-    each is not_tracking at its own stamp."""
-    tracking, sent = _tracking(None)
+    rate budget holds them back until the next control tick, which may itself come right
+    after them. Within one tick's budget (0.75° at 150°/s and 200 Hz) of the newest by then,
+    or a later command followed at once: followed. Further behind (a stream faster than the
+    rate limit, a hold after a trip): each is not_tracking at its own stamp."""
+    tracking, sent = _tracking(None, catch_up_deg=0.75)
     tracking.command(0, 1.00, 0.99, catch_up=True)  # held back by microseconds of budget
     tracking.command(5_000_000, 1.05, 0.99, catch_up=True)  # the same burst
     assert sent == [] and len(tracking.pending) == 2
-    tracking.settle(1.05)  # the next control tick reached the newest
+    tracking.settle(1.02)  # a tick right after them: on its way at the full rate
     assert sent == [] and tracking.pending == []
     tracking.command(10_000_000, 1.10, 1.06, catch_up=True)
     tracking.command(15_000_000, 1.15, 1.15, catch_up=True)  # followed at once: so was 1.10
     assert sent == []
-    tracking.command(20_000_000, 2.00, 1.50, catch_up=True)
-    tracking.settle(1.80)  # still short at the next tick: a real rate limit
+    tracking.command(20_000_000, 3.00, 1.50, catch_up=True)
+    tracking.settle(2.00)  # a whole degree behind at the next tick: the rate limit holds it
     assert [(a.kind, a.first_ns, a.last_ns) for a in sent] == [("not_tracking", 20_000_000, None)]
-    tracking.command(25_000_000, 2.10, 2.10, catch_up=True)  # followed at once: episode ends
+    tracking.command(25_000_000, 3.10, 3.10, catch_up=True)  # followed at once: episode ends
     assert (sent[-1].first_ns, sent[-1].last_ns) == (20_000_000, 20_000_000)
     tracking.command(30_000_000, 40.0, 35.0)  # clamped: judged at once, never held
     assert sent[-1].kind == "not_tracking" and sent[-1].first_ns == 30_000_000
