@@ -252,12 +252,19 @@ class BusyProcesses:
 
 def pause(proc: Any, seconds: float) -> None:
     """SIGSTOP a process for ``seconds`` (a node frozen by the OS, a debugger, swapping), then
-    SIGCONT it; it is continued even if the wait is interrupted."""
+    SIGCONT it; it is continued even if the wait is interrupted. A process that ended while
+    stopped (the launcher's stop resumes a stopped node so that it handles its SIGINT) is
+    left as it is."""
+    import psutil
+
     proc.suspend()
     try:
         time.sleep(seconds)
     finally:
-        proc.resume()
+        try:
+            proc.resume()
+        except psutil.NoSuchProcess:
+            pass
 
 
 def start_session(args: Sequence[str], env: dict[str, str]) -> "subprocess.Popen[str]":
