@@ -434,7 +434,7 @@ class Generator:
             return "barrier"
         if self.hold_since is not None:
             return "holding"
-        if self.pacer.flow_control and self.k >= self.pacer.k_seen + 1 + self.pacer.max_lead:
+        if self.pacer.flow_control and self.k >= self.pacer.credit_until:
             return "waiting for credit"
         return "streaming"
 
@@ -447,7 +447,7 @@ class Generator:
             "plan_revision": self.plan.revision,
         }
         if self.pacer.flow_control:
-            values["credit_until"] = self.pacer.k_seen + 1 + self.pacer.max_lead
+            values["credit_until"] = self.pacer.credit_until
         level = WARN if state == "waiting for credit" else OK
         self.diag_pub.publish(
             diagnostic_array(

@@ -32,6 +32,11 @@ class StreamPacer:
         """The coefficients of plan sample k came back (out-of-order returns are harmless)."""
         self.k_seen = max(self.k_seen, k)
 
+    @property
+    def credit_until(self) -> int:
+        """Exclusive end index the credit allows (flow control)."""
+        return self.k_seen + 1 + self.max_lead
+
     def target(self, wall_s: float) -> int:
         """Samples that may have been published by ``wall_s`` (exclusive end index)."""
         if self.wall0 is None:
@@ -41,5 +46,5 @@ class StreamPacer:
             elapsed = wall_s - self.wall0
             target = min(target, int(elapsed * self.real_time_factor * self.fs) + 1)
         if self.flow_control:
-            target = min(target, self.k_seen + 1 + self.max_lead)
+            target = min(target, self.credit_until)
         return max(target, 0)

@@ -261,7 +261,7 @@ class Launcher:
             self.start()
             deadline = None if duration_s is None else time.monotonic() + duration_s
             lease_s = self.lease_s()
-            reported: dict[str, float] = {}  # stopped nodes named, and how long they were
+            reported: set[str] = set()  # stopped nodes named past the lease
             checked = 0.0
             reason = None
             while reason is None and not stop_reason:
@@ -287,23 +287,20 @@ class Launcher:
             return 1
         return 0
 
-    def _report_stopped(
-        self, lease_s: float, reported: dict[str, float], now: float | None = None
-    ) -> None:
+    def _report_stopped(self, lease_s: float, reported: set[str], now: float | None = None) -> None:
         """Name a node stopped past the DDS lease, once, and again when it runs on."""
         stopped = self.stopped(now)
         for name, seconds in stopped.items():
-            reported_s = reported.get(name)
-            if seconds > lease_s and reported_s is None:
-                reported[name] = seconds
+            if seconds > lease_s and name not in reported:
+                reported.add(name)
                 _log(
                     f"warning: node {name!r} has been stopped (SIGSTOP, job control or a "
                     f"debugger) for {seconds:.0f} s, past the DDS participant lease "
                     f"({lease_s:g} s): its peers have dropped it with what they had not "
                     "delivered to it"
                 )
-        for name in [n for n in reported if n not in stopped]:
-            del reported[name]
+        for name in sorted(reported - stopped.keys()):
+            reported.discard(name)
             _log(f"node {name!r} runs again (it was stopped for longer than the lease)")
 
 

@@ -207,7 +207,7 @@ def test_a_stopped_node_is_named_past_the_lease_and_still_stops_cleanly(
         os.kill(listener.pid, signal.SIGSTOP)
         assert wait_for(lambda: launcher.stopped() != {}, 10)
         t0 = launcher.stopped_since["listener"]
-        reported: dict[str, float] = {}
+        reported: set[str] = set()
         launcher._report_stopped(10.0, reported, now=t0 + 9.0)
         assert "has been stopped" not in capsys.readouterr().err  # within the lease
         launcher._report_stopped(10.0, reported, now=t0 + 11.0)

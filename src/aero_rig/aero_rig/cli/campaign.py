@@ -120,24 +120,14 @@ def main(args: argparse.Namespace) -> int:
     elif launcher.failed_node == "identifier" and outcome.plan_ended:
         # The identifier died after the plan's end (in its final identification): the graph
         # was stopped, and the recorder closed a bag that holds the whole plan, or says what
-        # it lacks (then a fit would only repeat the loss: the failure stands).
-        short = bag_problems(run_dir / "bag", outcome.total) if outcome.total else ["no plan"]
-        if short:
-            print(f"aero-rig: the bag lacks samples ({short[0]}): no recovery", file=sys.stderr)
-        else:
-            recovered = recover_from_bag(run_dir, launcher, launcher.failure or "")
-            if recovered is not None:
-                launcher.failure = None
+        # it lacks (then the failure stands).
+        recovered = recover_from_whole_bag(run_dir, launcher, outcome, launcher.failure or "")
+        if recovered is not None:
+            launcher.failure = None
     elif not launcher.failure and (missed := samples_missed(run_dir)):
         # The identifier finished without samples the recorder may hold (it was paused past
-        # the DDS lease, which dropped it as a reader): the bag decides, unless it is short of
-        # samples itself (then a second fit would only repeat the loss).
-        short = bag_problems(run_dir / "bag", outcome.total) if outcome.total else []
-        if short:
-            print(f"aero-rig: {missed}; the bag lacks samples too ({short[0]}): no recovery",
-                  file=sys.stderr)  # fmt: skip
-        else:
-            recovered = recover_from_bag(run_dir, launcher, missed)
+        # the DDS lease, which dropped it as a reader): the bag decides.
+        recovered = recover_from_whole_bag(run_dir, launcher, outcome, missed)
     if launcher.failure:
         print(f"aero-rig: campaign failed: {launcher.failure}", file=sys.stderr)
         print(
@@ -278,6 +268,19 @@ def recover_from_bag(run_dir: Path, launcher: Launcher, stalled: str) -> dict[st
         "samples_read": data.messages,
         "clean": result.clean,
     }
+
+
+def recover_from_whole_bag(
+    run_dir: Path, launcher: Launcher, outcome: Outcome, reason: str
+) -> dict[str, Any] | None:
+    """``recover_from_bag`` unless the bag is short of plan samples itself (a second fit would
+    only repeat the loss: said, and None)."""
+    short = bag_problems(run_dir / "bag", outcome.total) if outcome.total else ["no plan seen"]
+    if short:
+        print(f"aero-rig: {reason}; the bag lacks samples too ({short[0]}): no recovery",
+              file=sys.stderr)  # fmt: skip
+        return None
+    return recover_from_bag(run_dir, launcher, reason)
 
 
 def samples_missed(run_dir: Path) -> str | None:
