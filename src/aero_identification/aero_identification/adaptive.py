@@ -41,10 +41,11 @@ import numpy as np
 
 from rig_runtime.params import Parameter
 
+from .bla import estimate_bla, frf_noise_variance
 from .data import PeriodicData
 
-# bla.py (scipy) and clustering.py (scikit-learn) are imported where they are used: the
-# identifier node imports this module, and loads them only in an adaptive run.
+# clustering.py (scikit-learn) is imported where it is used: the identifier node imports this
+# module, and loads it only in an adaptive run (bla.py needs numpy only).
 
 Action = Literal["go_on", "end_realization", "finish_level", "add_realization"]
 
@@ -158,11 +159,8 @@ def noise_db(data: PeriodicData) -> float:
     """Relative noise variance (dB) of the FRF of one realization, the mean over its P >= 2
     periods: the robust estimate with M = 1 (Pintelon & Schoukens 2012, §4.3.1)."""
     U, Y = _excited(data)
-    Gp = Y[:, :, -1] / U[:, :, -1]
-    G = Gp.mean(axis=1)
-    P = Gp.shape[1]
-    var = np.sum(np.abs(Gp - G[:, None]) ** 2, axis=1) / (P * (P - 1))
-    return relative_variance_db(var, G)
+    G_mp = Y[:, :, -1:] / U[:, :, -1:]
+    return relative_variance_db(frf_noise_variance(G_mp), G_mp.mean(axis=(1, 2)))
 
 
 def dominant_periods(data: PeriodicData) -> tuple[int, np.ndarray]:
@@ -266,8 +264,6 @@ def judge_period(
                 "go_on", f"{done} realization(s): the floor is {bounds.min_realizations}"
             )
         return Verdict("go_on", "too few valid periods to judge the level")
-    from .bla import estimate_bla
-
     bla = estimate_bla(level_data, method="robust")
     figures["total_db"] = relative_variance_db(bla.var_total, bla.G)
     figures["noise_db"] = relative_variance_db(bla.var_noise, bla.G)

@@ -127,6 +127,16 @@ def _check_input_power(U_abs: np.ndarray, lines: np.ndarray) -> None:
         )
 
 
+def frf_noise_variance(G_mp: np.ndarray) -> np.ndarray:
+    """Noise variance of the robust BLA from the (F, P, M) per-period FRFs, P >= 2: the sample
+    variance over the periods of each realization, divided by P for the period average and by M
+    for the realization average (Pintelon & Schoukens 2012 §4.3.1; docs/design.md §7). With
+    M = 1 it is the noise variance of one realization's FRF (the adaptive rules' figure)."""
+    _, P, M = G_mp.shape
+    G_m = G_mp.mean(axis=1, keepdims=True)
+    return np.sum(np.abs(G_mp - G_m) ** 2, axis=(1, 2)) / (M**2 * P * (P - 1))
+
+
 def estimate_bla(
     data: PeriodicData,
     method: str = "auto",
@@ -191,7 +201,7 @@ def estimate_bla(
         _check_input_power(np.abs(U).min(axis=1), lines)
         G_mp = Y / U
         G_m = G_mp.mean(axis=1)  # (F, M)
-        var_noise = np.sum(np.abs(G_mp - G_m[:, None, :]) ** 2, axis=(1, 2)) / (M**2 * P * (P - 1))
+        var_noise = frf_noise_variance(G_mp)
         U_mean = U.mean(axis=1)
         Y_mean = Y.mean(axis=1)
         # Levels of the period-averaged output spectrum over the band (Fig. 6 of the paper).

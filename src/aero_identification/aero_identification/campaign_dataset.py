@@ -9,6 +9,7 @@ started (or that an anomaly touched) and is not valid is excluded and named, exc
 still streaming before the final identification.
 """
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,24 @@ def _excited_lines(assembler: CampaignAssembler, level: int, realization: int) -
     return np.asarray(lv.realizations[realization].excited_lines, dtype=int)
 
 
+def equal_periods(
+    blocks: Sequence[PeriodBlock], columns: Sequence[np.ndarray], fs: float, lines: np.ndarray
+) -> PeriodicData:
+    """The realizations of one level as (N, P, M) periodic data: of each block the latest P of
+    its given period columns, P the smallest count among them (the nonparametric estimators
+    take equal P from every realization, Pintelon & Schoukens 2012 §4.3.1)."""
+    count = min(len(c) for c in columns)
+    cols = [np.asarray(c)[len(c) - count :] for c in columns]
+    return PeriodicData(
+        np.stack([b.u[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
+        np.stack([b.y[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
+        fs,
+        lines,
+        period_index=np.stack(cols, axis=1),
+        realization_index=np.array([b.realization for b in blocks]),
+    )
+
+
 def campaign_dataset(
     assembler: CampaignAssembler, final: bool, min_periods: int = 2, source: str = ""
 ) -> Dataset:
@@ -59,19 +78,11 @@ def campaign_dataset(
             for p in range(b.P)
             if (problem := b.period_problem(p)) and np.any(b.count_u[:, p] + b.count_y[:, p])
         ]
-        counts = [len(_valid_periods(b)) for b in blocks]
+        columns = [_valid_periods(b) for b in blocks]
         data = None
-        if len(blocks) >= 2 and min(counts) >= min_periods:
-            count = min(counts)
-            cols = [_valid_periods(b)[-count:] for b in blocks]
-            data = PeriodicData(
-                np.stack([b.u[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
-                np.stack([b.y[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
-                assembler.fs,
-                _excited_lines(assembler, level, blocks[0].realization),
-                period_index=np.stack(cols, axis=1),
-                realization_index=np.array([b.realization for b in blocks]),
-            )
+        if len(blocks) >= 2 and min(len(c) for c in columns) >= min_periods:
+            lines = _excited_lines(assembler, level, blocks[0].realization)
+            data = equal_periods(blocks, columns, assembler.fs, lines)
         levels.append(
             LevelRecord(
                 names[level],

@@ -58,6 +58,7 @@ from rig_runtime.interface import (
 
 from . import adaptive, refit_worker
 from .campaign import CampaignAssembler
+from .campaign_dataset import equal_periods
 from .config import config_from_parameters, config_parameters
 from .data import PeriodicData
 from .quality import data_quality_lines
@@ -415,17 +416,10 @@ class Identifier:
             np.flatnonzero(asm.blocks[(level, m)].period_valid()) for m in range(realization)
         ]
         columns.append(valid)
-        count = min(len(c) for c in columns)
         level_data = None
-        if count >= 2 and len(columns) >= 2:
+        if min(len(c) for c in columns) >= 2 and len(columns) >= 2:
             blocks = [asm.blocks[(level, m)] for m in range(realization + 1)]
-            cols = [c[-count:] for c in columns]
-            level_data = PeriodicData(
-                np.stack([b.u[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
-                np.stack([b.y[:, c] for b, c in zip(blocks, cols, strict=True)], axis=2),
-                asm.fs,
-                lines,
-            )
+            level_data = equal_periods(blocks, columns, asm.fs, lines)
         offsets = sorted(lv.offset_deg for lv in asm.plan.levels)
         return adaptive.judge_period(
             current,

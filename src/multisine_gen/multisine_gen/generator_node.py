@@ -220,8 +220,6 @@ class Generator:
         self.total = len(self.command_deg)
         self.starts = {s.start_k: s for s in plan.segments}
         self.ends = {s.stop_k - 1: s for s in plan.segments}
-        if hasattr(self, "pacer"):
-            self.pacer.total = self.total
 
     def _publish_plan(self) -> None:
         assert self.t0_ns is not None
@@ -268,6 +266,7 @@ class Generator:
             self._event(record | {"event": "refused", "why": str(exc)})
             return
         self._use(revision.plan)
+        self.pacer.total = self.total
         self._publish_plan()
         self.node.logger.info(
             "plan revision %d from sample %d%s: %s (%s)",
