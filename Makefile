@@ -69,10 +69,10 @@ typecheck: $(STAMP)
 # build, the in-process pipeline, the clustering ablation): they would only run twice.
 DDS_PASS_SKIPS := not (colcon or pipeline_inprocess or clustering_ablation)
 test: lint typecheck $(ROS2_TOOLS)
-	$(BIN)/pytest
+	$(BIN)/pytest --durations=25
 	@if $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
 	  echo "== the graph suite again, on the Cyclone DDS backend"; \
-	  RIG_RUNTIME_BACKEND=dds $(BIN)/pytest -m slow -k "$(DDS_PASS_SKIPS)"; \
+	  RIG_RUNTIME_BACKEND=dds $(BIN)/pytest --durations=15 -m slow -k "$(DDS_PASS_SKIPS)"; \
 	fi
 
 # Unit tests only (no node graph, no campaign, no build): under a minute.

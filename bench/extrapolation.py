@@ -37,6 +37,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--stress", type=float, default=1.3,
                         help="config.scan_stress (default 1.3; 0: off)")  # fmt: skip
+    parser.add_argument("--splits", type=int, default=1,
+                        help="config.scan_splits (default 1; 2: the cross-fit)")  # fmt: skip
     args = parser.parse_args()
     directory = os.environ.get("F16_GVT_DIR", str(HERE.parent.parent / "shared/data/f16-gvt"))
     patterns = [f"*Level{k}.csv" for k in (1, 3, 5, 7)]
@@ -46,7 +48,7 @@ def main() -> None:
     config = IdentificationConfig(
         nx=0, structure="statesonly", degrees=(3,), max_iter=20, scan=True, scan_nx=(0,),
         scan_degrees=((3,), (2, 3)), scan_equations=("state", "state+output"), scan_max_iter=20,
-        clustering_ablation=False, scan_stress=args.stress,
+        clustering_ablation=False, scan_stress=args.stress, scan_splits=args.splits,
     )  # fmt: skip
     t0 = time.perf_counter()
     result = identify(dataset, config, final=True, held_out=("7",), log=print)
@@ -66,6 +68,7 @@ def main() -> None:
         mark = " **kept**" if i == scan.best_index else ""
         print(f"| {row.nx} | {','.join(map(str, row.degrees))} | {row.equations} | {row.start} "
               f"| {row.n_params} | {row.validation_error:.4f} | {row.validation_se:.4f} "
+              f"({' / '.join(f'{e:.4f}' for e in row.split_errors)}) "
               f"| {row.status} | {e7:.4f}{mark} |")  # fmt: skip
     print(scan.rule)
     ratio = kept / best if math.isfinite(best) else math.nan
@@ -73,8 +76,8 @@ def main() -> None:
           f"{100 * (ratio - 1):.1f} % above ({'within' if ratio <= 1.10 else 'OVER'} the 10 % "
           f"target); identification {seconds:.1f} s")  # fmt: skip
     print(json.dumps({
-        "scan_stress": args.stress, "kept_level7": kept, "best_level7": best, "ratio": ratio,
-        "seconds": seconds,
+        "scan_stress": args.stress, "scan_splits": args.splits, "kept_level7": kept,
+        "best_level7": best, "ratio": ratio, "seconds": seconds,
         "rows": [{**r.as_dict(), "level7": e} for r, e in zip(scan.rows, test, strict=True)],
     }))  # fmt: skip
 

@@ -1,5 +1,6 @@
 """The campaign pipeline on an in-process simulation of the short plan (no middleware)."""
 
+import dataclasses
 import json
 from typing import Any
 
@@ -300,13 +301,30 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
 
     asm = _assemble(campaign)
     config = IdentificationConfig(
-        scan=True, scan_nx=(1, 2), scan_degrees=((2,), (2, 3)), scan_max_iter=10, scan_workers=1
-    )
+        scan=True, scan_nx=(1, 2), scan_degrees=((2,), (2, 3)), scan_max_iter=10, scan_workers=1,
+        scan_splits=2,
+    )  # fmt: skip
     result = identify(asm, config, final=True)
     # nx × degree sets × equations × the two LM starts (linear, output least squares)
     assert result.scan is not None and len(result.scan.rows) == 2 * 2 * 2 * 2
     assert {r.start for r in result.scan.rows} == {"linear", "output_ls"}
     assert result.pnlss_all is result.scan.best
+    # The cross-fit (scan_splits 2): each candidate fitted again with the other realization of
+    # every level held out (pnlss_sets fold 1: training and held-out sets swapped); the kept
+    # models are those of the one-split scan.
+    estimation = [lv for lv in result.levels.values() if lv.role == "estimation"]
+    train, held, _ = pipeline.pnlss_sets(estimation, config)
+    train_1, held_1, how_1 = pipeline.pnlss_sets(estimation, config, fold=1)
+    assert held is not None and held_1 is not None and how_1 == "realization 0 of each level"
+    np.testing.assert_array_equal(train_1.y, held.y)
+    np.testing.assert_array_equal(held_1.y, train.y)
+    assert all(len(r.split_errors) == 2 for r in result.scan.rows if r.status == "ok")
+    one = identify(asm, dataclasses.replace(config, scan_splits=1), final=True)
+    assert one.scan is not None and all(r.split_errors == () for r in one.scan.rows)
+    for a, b, ma, mb in zip(one.scan.rows, result.scan.rows, one.scan.models, result.scan.models,
+                            strict=True):  # fmt: skip
+        assert b.split_errors[:1] == (a.validation_error,) or a.status != "ok"
+        assert (ma is None) == (mb is None) and (ma is None or np.array_equal(ma.E, mb.E))
     assert ("PNLSS", "high", 1.0) in result.errors_all
     interim = identify(asm, config)  # online refits keep the single structure
     assert interim.scan is None and interim.pnlss_all is not None

@@ -152,6 +152,17 @@ class IdentificationConfig:
     scan_stress: float = hyper(
         1.3, "scan: held-out input scale a candidate must stay stable at (0: no check)", min=0.0
     )
+    # Cross-fit of the scan (issue 22; scan.py, docs/design.md §7.6): every candidate is fitted
+    # on this many (training, held-out) splits, each with another realization of every level
+    # held out (one realization per level: another period), and scored by the splits' mean
+    # error with the K-fold SE, so that a structure whose fit depends on the realization it saw
+    # loses to a simpler one. Capped at the realizations (periods) there are; each split adds
+    # the scan's cost once more. Default 1 (one split, the SE the held-out noise only): with 2,
+    # the default campaign's Table 1 was worse on each of three plant seeds (README,
+    # "Selection that extrapolates"), F-16's pick unchanged.
+    scan_splits: int = hyper(
+        1, "scan: cross-fit splits per candidate (1 = one held-out realization)", min=1
+    )
 
     def __post_init__(self) -> None:
         for spec in _SPECS:

@@ -281,7 +281,7 @@ def validation_realization(data: PeriodicData, config: IdentificationConfig) -> 
 
 
 def pnlss_sets(
-    levels: Sequence[LevelResult], config: IdentificationConfig
+    levels: Sequence[LevelResult], config: IdentificationConfig, fold: int = 0
 ) -> tuple[PeriodicData, PeriodicData | None, str]:
     """Training and held-out sets of the PNLSS fit, one steady-state mean period per record.
 
@@ -291,6 +291,10 @@ def pnlss_sets(
     cheaper. Held out (chooses the iterate): the mean of the kept periods of realization
     `validation_realization` when M ≥ 2; with M = 1 the last period (independent noise, same
     excitation) and the training mean is over the others; with one period, none.
+
+    ``fold`` k > 0: the structure scan's cross-fit split k (`scan_splits`): the realization k
+    places after `validation_realization` (cyclically) is held out instead, or with M = 1 the
+    period k places before the last.
     """
     us: list[np.ndarray] = []
     ys: list[np.ndarray] = []
@@ -302,6 +306,7 @@ def pnlss_sets(
         assert d is not None
         val = validation_realization(d, config)
         if val is not None:
+            val = (val + fold) % d.M
             how = f"realization {int(d.realization_index[val])} of each level"
             for m in range(d.M):
                 cols = _kept(res, m)
@@ -309,12 +314,14 @@ def pnlss_sets(
                 target[0].append(d.u[:, cols, m].mean(axis=1))
                 target[1].append(d.y[:, cols, m].mean(axis=1))
         elif d.P >= 2:
-            how = "the last period of each level"
             cols = _kept(res, 0)
-            us.append(d.u[:, cols[:-1], 0].mean(axis=1))
-            ys.append(d.y[:, cols[:-1], 0].mean(axis=1))
-            uv.append(d.u[:, cols[-1], 0])
-            yv.append(d.y[:, cols[-1], 0])
+            held = len(cols) - 1 - fold % len(cols)
+            how = "the last period of each level" if fold == 0 else f"kept period {held}"
+            rest = np.delete(cols, held)
+            us.append(d.u[:, rest, 0].mean(axis=1))
+            ys.append(d.y[:, rest, 0].mean(axis=1))
+            uv.append(d.u[:, cols[held], 0])
+            yv.append(d.y[:, cols[held], 0])
         else:
             us.append(d.u[:, 0, 0])
             ys.append(d.y[:, 0, 0])
@@ -329,6 +336,17 @@ def pnlss_sets(
         return train, None, "none (a level has one period and one realization)"
     held = PeriodicData(stack(uv), stack(yv), first.fs, first.excited_lines)
     return train, held, how
+
+
+def scan_split_count(levels: Sequence[LevelResult]) -> int:
+    """How many distinct held-out sets `pnlss_sets` can make: the fewest realizations of any
+    level, or of kept periods where a level has one realization."""
+    counts = []
+    for res in levels:
+        d = res.record.data
+        assert d is not None
+        counts.append(d.M if d.M >= 2 else len(_kept(res, 0)))
+    return min(counts, default=1)
 
 
 def pnlss_parameters(nx: int, degrees: Sequence[int], structure: str, equations: str) -> int:
@@ -399,6 +417,11 @@ def _scan(
     and named."""
     data, validation, how = pnlss_sets(levels, config)
     result.pnlss_held_out = how
+    splits = []
+    for fold in range(1, min(config.scan_splits, scan_split_count(levels))):
+        train_k, held_k, _ = pnlss_sets(levels, config, fold)
+        if held_k is not None:
+            splits.append((train_k, held_k))
     low = levels[0]
     lin = result.linear_level1
     if validation is None:
@@ -465,8 +488,12 @@ def _scan(
             validation_weights=_level_weights(validation, config.level_weighting),
             starts=("linear", "output_ls"),  # the latter: the single-structure fit's start
             stress=config.scan_stress or None,
+            splits=splits,
         )
-        say(f"PNLSS structure scan: {len(scan.rows)} fits, {time.perf_counter() - t0:.1f} s")
+        say(
+            f"PNLSS structure scan: {len(scan.rows)} candidates × {1 + len(splits)} split(s), "
+            f"{time.perf_counter() - t0:.1f} s"
+        )
         return scan
     except (ValueError, OSError) as exc:  # OSError: the Dask scheduler cannot be reached
         result.warnings.append(f"PNLSS structure scan failed: {exc}")

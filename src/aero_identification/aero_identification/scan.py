@@ -22,6 +22,13 @@ Score and selection rule (docs/design.md §7.6):
   realization would claim a precision its noise does not have, and a candidate would win
   only because its best LM iterate was chosen on the same data (a linear system otherwise
   "prefers" a cubic model by 3 %).
+- Cross-fit (``splits``; the pipeline's ``scan_splits``, default 2): the SE above measures
+  the noise on one held-out set, not how well a structure's extra terms are determined. So
+  every candidate is also fitted with another realization held out (with one realization per
+  level: another period), and its score is the mean of the K splits' errors with the K-fold
+  SE, max(std_k(E_k)/√K, √(Σ_k SE_k²)/K) (Hastie, Tibshirani & Friedman 2009 §7.10.1): a
+  structure whose fit depends on which realization it saw has a large spread, and the rule
+  below then prefers a simpler one. The kept model is the fit on the first split.
 - One-standard-error rule (Breiman et al. 1984 §3.4.3; Hastie, Tibshirani & Friedman 2009
   §7.10): among the candidates whose E is within the best candidate's E + SE, keep the one with
   the fewest parameters (ties: the lower E). A richer model must beat a simpler one by more
@@ -43,7 +50,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -88,10 +95,14 @@ class ScanRow:
     fit_seconds: float
     status: str  # "ok" or what went wrong
     start: str = "linear"
+    # Cross-fit (module docs): the validation error of each split, the first the kept model's;
+    # validation_error is then their mean. Empty: one split.
+    split_errors: tuple[float, ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["degrees"] = list(self.degrees)
+        d["split_errors"] = list(self.split_errors)
         return d
 
 
@@ -124,16 +135,18 @@ class ScanResult:
     def to_markdown(self) -> str:
         head = (
             "| nx | degrees | equations | structure | start | parameters | validation error | SE "
-            "| training error | fit s | status |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+            "| per split | training error | fit s | status |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
         )
         lines = []
         for i, r in enumerate(self.rows):
             mark = " **(selected)**" if i == self.best_index else ""
+            per_split = " / ".join(map(_fmt, r.split_errors)) or "–"
             lines.append(
                 f"| {r.nx} | {','.join(map(str, r.degrees))} | {r.equations} | {r.structure} "
                 f"| {r.start} | {r.n_params} | {_fmt(r.validation_error)}{mark} "
-                f"| {_fmt(r.validation_se)} | {_fmt(r.training_error)} | {r.fit_seconds:.1f} "
-                f"| {r.status} |"
+                f"| {_fmt(r.validation_se)} | {per_split} | {_fmt(r.training_error)} "
+                f"| {r.fit_seconds:.1f} | {r.status} |"
             )
         return head + "\n".join(lines) + f"\n\nRule: {self.rule}\n"
 
@@ -141,7 +154,10 @@ class ScanResult:
         keys = [*ScanRow.__dataclass_fields__, "selected"]
         out = [",".join(keys)]
         for row in self.table:
-            values = [" ".join(map(str, row[k])) if k == "degrees" else str(row[k]) for k in keys]
+            values = [
+                " ".join(map(str, row[k])) if k in ("degrees", "split_errors") else str(row[k])
+                for k in keys
+            ]
             out.append(",".join(values))
         return "\n".join(out) + "\n"
 
@@ -195,6 +211,7 @@ def scan_pnlss(
     validation_weights: np.ndarray | None = None,
     starts: Iterable[str] = ("linear",),
     stress: float | None = 1.3,
+    splits: Sequence[tuple[PeriodicData, PeriodicData]] = (),
 ) -> ScanResult:
     """Fit every candidate PNLSS structure and select one by cross-validation (module docs).
 
@@ -222,6 +239,10 @@ def scan_pnlss(
             scaled about their mean by this factor (fit_pnlss), and a candidate whose
             steady-state response there diverges or is not periodic is rejected (status
             "unstable at …"; module docs). None: no such check.
+        splits: further (training, held-out) splits of the same records, e.g. with another
+            realization held out: every candidate is also fitted and scored on each, and its
+            validation error and SE become those of the cross-fit (module docs); the kept
+            model is the one fitted on (`data`, `validation`). Weights apply to every split.
 
     Returns:
         A ScanResult: `.best` (the selected PNLSSModel, with `.simulate(u)`), `.table`,
@@ -238,9 +259,16 @@ def scan_pnlss(
         )
     if max_iter < 1:
         raise ValueError(f"max_iter must be >= 1; got {max_iter}")
+    for k, (train_k, held_k) in enumerate(splits, start=2):  # split 1: data, validation
+        if train_k.u.shape[0] != data.u.shape[0] or held_k.u.shape != validation.u.shape:
+            raise ValueError(
+                f"split {k}: its sets must match the first split's period length and held-out "
+                f"shape {validation.u.shape}; got {train_k.u.shape} and {held_k.u.shape}"
+            )
     grid = candidate_grid(nx, degrees, equations, structures, starts)
     linears = _linear_models(data, sorted({c.nx for c in grid}), linear)
-    jobs = [(c, linears[c.nx]) for c in grid]
+    sets = [(data, validation), *splits]
+    jobs = [(c, linears[c.nx], k) for c in grid for k in range(len(sets))]
     options = {
         "max_iter": int(max_iter),
         "record_weights": record_weights,
@@ -248,9 +276,10 @@ def scan_pnlss(
         "stress": stress,
     }
     t0 = time.perf_counter()
-    results, where = _run(jobs, data, validation, options, client, workers)
-    rows = [r for r, _ in results]
-    models = [m for _, m in results]
+    results, where = _run(jobs, sets, options, client, workers)
+    per = len(sets)
+    rows = [cross_fit([r for r, _ in results[i : i + per]]) for i in range(0, len(results), per)]
+    models = [results[i][1] for i in range(0, len(results), per)]
     best, why = select_one_se(rows)
     return ScanResult(
         rows=rows,
@@ -283,6 +312,45 @@ def select_one_se(rows: Sequence[ScanRow]) -> tuple[int, str]:
     return best, why
 
 
+def cross_fit(rows: Sequence[ScanRow]) -> ScanRow:
+    """One candidate's row from its fits on K splits (the first: the kept model's).
+
+    E = mean of the K validation errors E_k. SE = max(std(E_k)/√K, √(Σ SE_k²)/K): the spread
+    of the K-fold estimate (Hastie, Tibshirani & Friedman 2009 §7.10.1), which holds the model's
+    own variability (a different fit per split), and never less than the noise resolution of
+    the mean of K errors. A split whose fit failed, diverged or lost stability rejects the
+    candidate, naming the split.
+    """
+    first = rows[0]
+    if len(rows) == 1:
+        return first
+    errors = tuple(r.validation_error for r in rows)
+    bad = next(
+        (
+            (k, r)
+            for k, r in enumerate(rows)
+            if r.status != "ok" or not math.isfinite(r.validation_error)
+        ),
+        None,
+    )
+    if bad is not None:
+        k, r = bad
+        status = r.status if r.status != "ok" else "diverges on the validation data"
+        status = status if k == 0 else f"split {k + 1}: {status}"
+        return replace(first, status=status, validation_error=math.nan, split_errors=errors)
+    K = len(rows)
+    mean = float(np.mean(errors))
+    spread = float(np.std(errors, ddof=1)) / math.sqrt(K)
+    noise = math.sqrt(sum(r.validation_se**2 for r in rows)) / K
+    return replace(
+        first,
+        validation_error=mean,
+        validation_se=max(spread, noise),
+        fit_seconds=sum(r.fit_seconds for r in rows),
+        split_errors=errors,
+    )
+
+
 def _linear_models(
     data: PeriodicData, orders: list[int], linear: LinearSource
 ) -> dict[int, LinearStateSpace]:
@@ -301,10 +369,12 @@ def _linear_models(
     return {n: linear[n] for n in orders}
 
 
+Job = tuple[Candidate, LinearStateSpace, int]  # the candidate, its start, its split
+
+
 def _run(
-    jobs: list[tuple[Candidate, LinearStateSpace]],
-    data: PeriodicData,
-    validation: PeriodicData,
+    jobs: list[Job],
+    sets: list[tuple[PeriodicData, PeriodicData]],
     options: dict[str, Any],
     client: Any,
     workers: int | None,
@@ -314,7 +384,8 @@ def _run(
         if n < 1:
             raise ValueError(f"workers must be >= 1; got {n}")
         if n == 1 or len(jobs) == 1:
-            return [fit_candidate(c, lin, data, validation, options) for c, lin in jobs], "serial"
+            fits = [fit_candidate(c, lin, *sets[k], options) for c, lin, k in jobs]
+            return fits, "serial"
         from dask.distributed import Client, LocalCluster
 
         with (
@@ -328,10 +399,10 @@ def _run(
             ) as cluster,
             Client(cluster) as local,
         ):
-            return _on_client(local, jobs, data, validation, options), (
+            return _on_client(local, jobs, sets, options), (
                 f"local Dask cluster, {min(n, len(jobs))} worker processes"
             )
-    return _on_client(client, jobs, data, validation, options), f"Dask client {client}"
+    return _on_client(client, jobs, sets, options), f"Dask client {client}"
 
 
 @contextlib.contextmanager
@@ -365,21 +436,21 @@ def _workers_without_main_script() -> Iterator[None]:
 
 def _on_client(
     client: Any,
-    jobs: list[tuple[Candidate, LinearStateSpace]],
-    data: PeriodicData,
-    validation: PeriodicData,
+    jobs: list[Job],
+    sets: list[tuple[PeriodicData, PeriodicData]],
     options: dict[str, Any],
 ) -> list[tuple[ScanRow, PNLSSModel | None]]:
     # Data once per worker, not once per task; the largest candidates first, so the last
     # task to finish is a small one. One numba thread per fit: the workers are the
     # parallelism (the kernels' own prange over records would oversubscribe the cores).
     options = {**options, "numba_threads": 1}
-    data_f, val_f = client.scatter([data, validation], broadcast=True)
+    scattered = client.scatter([x for pair in sets for x in pair], broadcast=True)
     order = sorted(range(len(jobs)), key=lambda i: -_size(jobs[i][0]))
-    futures = {
-        i: client.submit(fit_candidate, jobs[i][0], jobs[i][1], data_f, val_f, options, pure=False)
-        for i in order
-    }
+    futures = {}
+    for i in order:
+        c, lin, k = jobs[i]
+        data_f, val_f = scattered[2 * k], scattered[2 * k + 1]
+        futures[i] = client.submit(fit_candidate, c, lin, data_f, val_f, options, pure=False)
     return [futures[i].result() for i in range(len(jobs))]
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from aero_identification import scan_pnlss
 from aero_identification.data import PeriodicData
-from aero_identification.scan import ScanRow, candidate_grid, select_one_se
+from aero_identification.scan import ScanRow, candidate_grid, cross_fit, select_one_se
 from aero_identification.subspace import fit_linear_ss
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -88,6 +88,53 @@ def test_one_standard_error_rule() -> None:
         select_one_se([row(5, float("nan"), 0, "failed: diverged")])
 
 
+def _row(n: int, err: float, se: float, status: str = "ok") -> ScanRow:
+    return ScanRow(1, (2,), "state", "full", n, err, se, err, 0.1, status)
+
+
+def test_cross_fit_prefers_the_simpler_model_when_a_fit_depends_on_its_split() -> None:
+    """Issue 22: the richer candidate wins on the first held-out realization by far more than
+    its noise SE, but fitted with the other realization held out it is worse than the simple
+    one. Its K-fold SE (the spread over the splits) then puts the simple one within reach."""
+    simple = [_row(10, 0.30, 0.01), _row(10, 0.30, 0.01)]
+    rich = [_row(50, 0.20, 0.01), _row(50, 0.36, 0.01)]
+    assert select_one_se([simple[0], rich[0]])[0] == 1  # one split: the rich one
+    rows = [cross_fit(simple), cross_fit(rich)]
+    assert rows[1].validation_error == pytest.approx(0.28)
+    assert rows[1].validation_se == pytest.approx(np.std([0.20, 0.36], ddof=1) / np.sqrt(2))
+    assert rows[1].split_errors == (0.20, 0.36)
+    # Splits that agree: the SE is the noise of the mean of K errors, never zero.
+    assert rows[0].validation_se == pytest.approx(np.sqrt(2 * 0.01**2) / 2)
+    assert select_one_se(rows)[0] == 0
+
+
+def test_cross_fit_rejects_a_candidate_that_fails_on_another_split() -> None:
+    row = cross_fit([_row(10, 0.2, 0.01), _row(10, 0.3, 0.01, "unstable at 1.3× the ...")])
+    assert row.status == "split 2: unstable at 1.3× the ..." and np.isnan(row.validation_error)
+    row = cross_fit([_row(10, 0.2, 0.01), _row(10, float("inf"), float("nan"))])
+    assert row.status == "split 2: diverges on the validation data"
+    assert cross_fit([_row(10, 0.2, 0.01)]).split_errors == ()  # one split: the row as it is
+
+
+def test_scan_with_a_second_split_keeps_the_first_splits_models() -> None:
+    """The swapped split (realization 0 held out) scores every candidate a second time; the
+    models, and the first split's errors, are those of the one-split scan."""
+    train, val, linear = _split(k3=1.0, seed=1)
+    grid = {"nx": (2,), "degrees": ((2,), (3,)), "equations": ("state",), "max_iter": 8}
+    one = scan_pnlss(train, val, **grid, linear=linear, workers=1)
+    two = scan_pnlss(train, val, **grid, linear=linear, workers=1, splits=[(val, train)])
+    for a, b, ma, mb in zip(one.rows, two.rows, one.models, two.models, strict=True):
+        assert b.split_errors[0] == a.validation_error and len(b.split_errors) == 2
+        assert b.validation_error == pytest.approx(np.mean(b.split_errors))
+        assert ma is not None and mb is not None
+        np.testing.assert_array_equal(ma.E, mb.E)
+    assert " / " in two.to_markdown() and "split_errors" in two.to_csv()
+    two_records = PeriodicData(np.concatenate([val.u, val.u], 2), np.concatenate([val.y, val.y], 2),
+                               val.fs, LINES)  # fmt: skip
+    with pytest.raises(ValueError, match="split 2: its sets must match"):
+        scan_pnlss(train, val, **grid, linear=linear, workers=1, splits=[(train, two_records)])
+
+
 def test_grid_is_checked() -> None:
     assert len(candidate_grid()) == 3 * 3 * 2
     with pytest.raises(ValueError, match="unknown equations"):
@@ -107,15 +154,19 @@ def test_dask_cluster_selects_the_same_model_as_the_serial_scan() -> None:
 
     train, val, linear = _split(k3=1.0, seed=1)
     grid = {"nx": (2,), "degrees": ((2,), (2, 3)), "equations": ("state", "state+output")}
-    serial = scan_pnlss(train, val, **grid, max_iter=10, linear=linear, workers=1)
+    splits = [(val, train)]  # each task gets its own split's data
+    serial = scan_pnlss(train, val, **grid, max_iter=10, linear=linear, workers=1, splits=splits)
     with (
         LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster,
         Client(cluster) as client,
     ):
-        remote = scan_pnlss(train, val, **grid, max_iter=10, linear=linear, client=client)
+        remote = scan_pnlss(
+            train, val, **grid, max_iter=10, linear=linear, client=client, splits=splits
+        )
     assert remote.best_index == serial.best_index
     for a, b in zip(remote.rows, serial.rows, strict=True):
         assert a.validation_error == pytest.approx(b.validation_error, rel=1e-9)
+        assert a.split_errors == pytest.approx(b.split_errors, rel=1e-9)
     np.testing.assert_allclose(remote.best.E, serial.best.E, rtol=1e-9, atol=1e-12)
     assert N == 1024 and P == 3  # the shared case's layout, as _split assumes
 
