@@ -315,13 +315,13 @@ def pnlss_sets(
                 target[1].append(d.y[:, cols, m].mean(axis=1))
         elif d.P >= 2:
             cols = _kept(res, 0)
-            held = len(cols) - 1 - fold % len(cols)
-            how = "the last period of each level" if fold == 0 else f"kept period {held}"
-            rest = np.delete(cols, held)
+            last = len(cols) - 1 - fold % len(cols)  # the held-out period's position
+            how = "the last period of each level" if fold == 0 else f"kept period {last}"
+            rest = np.delete(cols, last)
             us.append(d.u[:, rest, 0].mean(axis=1))
             ys.append(d.y[:, rest, 0].mean(axis=1))
-            uv.append(d.u[:, cols[held], 0])
-            yv.append(d.y[:, cols[held], 0])
+            uv.append(d.u[:, cols[last], 0])
+            yv.append(d.y[:, cols[last], 0])
         else:
             us.append(d.u[:, 0, 0])
             ys.append(d.y[:, 0, 0])
