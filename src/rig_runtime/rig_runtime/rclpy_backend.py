@@ -43,14 +43,12 @@ EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
 PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
 PROFILES_FILE = Path(__file__).with_name("fastdds_profiles.xml")
 PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in that file
-# rmw_fastrtps publishes synchronously unless told otherwise: the publishing thread itself sends
-# each sample to every reader, and a node's callback waits for it. Asynchronously, Fast DDS's
-# own thread sends, so a stream node goes on with its next sample meanwhile. Measured on two
-# cores (README, "Measured figures"): streaming the short plan 15.0 s → 10.1 s, the transport
-# bench 29,600 → 41,200 msg/s, at a round trip of 3.9 ms against 0.7 ms at 200 Hz. Reliability
-# and max_blocking_time are the same in both modes. A user's own setting is kept.
-PUBLICATION_MODE_ENV = "RMW_FASTRTPS_PUBLICATION_MODE"
-PUBLICATION_MODE = "ASYNCHRONOUS"
+# rmw_fastrtps publishes synchronously (RMW_FASTRTPS_PUBLICATION_MODE unset): the publishing
+# callback sends each sample to every reader. ASYNCHRONOUS (Fast DDS's sending thread) streamed
+# the default campaign at 15.4× real time against 11.6×, but in a mixed graph (generator and
+# plant on rclpy, lift, identifier and recorder on Cyclone DDS) it lost tens of samples right
+# after the start barrier in 3 runs of 3, none in synchronous mode (README, "Known limits").
+# So the rmw's default stays; a user's setting is passed on as it is.
 
 
 def message_class(type_name: str) -> Any:
@@ -237,7 +235,6 @@ class RclpyBackend:
             raise ArgumentError(f"{EXECUTOR_ENV}={choice!r}: expected 'events' or 'single'")
         # Writers block up to 60 s for a slow reader, as on the DDS backend (the XML says why).
         os.environ.setdefault(PROFILES_ENV, str(PROFILES_FILE))
-        os.environ.setdefault(PUBLICATION_MODE_ENV, PUBLICATION_MODE)
         # A context per node: its own participant in the domain of this moment (tests move
         # between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself
         # (an orderly stop that lets the recorder drain), so rclpy installs no handler.

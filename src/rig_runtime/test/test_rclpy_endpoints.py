@@ -226,24 +226,3 @@ def test_a_topic_known_only_from_its_readers_has_no_type_for_the_recorder_yet(
         for node in (reader, recorder, writer):
             if node is not None:
                 node.close()
-
-
-def test_fast_dds_publishes_asynchronously_unless_the_user_chose(
-    rclpy_env: None, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """rmw_fastrtps's synchronous default made every stream node wait for its own sends; the
-    backend asks for the asynchronous mode (README, "Measured figures"), and keeps a user's."""
-    from rig_runtime.rclpy_backend import PUBLICATION_MODE_ENV
-
-    monkeypatch.delenv(PUBLICATION_MODE_ENV, raising=False)
-    node = Node("generator", argv=[])
-    try:
-        assert os.environ[PUBLICATION_MODE_ENV] == "ASYNCHRONOUS"
-    finally:
-        node.close()
-    monkeypatch.setenv(PUBLICATION_MODE_ENV, "SYNCHRONOUS")
-    node = Node("generator", argv=[])
-    try:
-        assert os.environ[PUBLICATION_MODE_ENV] == "SYNCHRONOUS"
-    finally:
-        node.close()
