@@ -417,11 +417,6 @@ def _scan(
     and named."""
     data, validation, how = pnlss_sets(levels, config)
     result.pnlss_held_out = how
-    splits = []
-    for fold in range(1, min(config.scan_splits, scan_split_count(levels))):
-        train_k, held_k, _ = pnlss_sets(levels, config, fold)
-        if held_k is not None:
-            splits.append((train_k, held_k))
     low = levels[0]
     lin = result.linear_level1
     if validation is None:
@@ -429,6 +424,11 @@ def _scan(
         return None
     if low.bla is None or lin is None:
         return None
+    splits = []
+    for fold in range(1, min(config.scan_splits, scan_split_count(levels))):
+        train_k, held_k, _ = pnlss_sets(levels, config, fold)
+        assert held_k is not None  # every level has a held-out set (checked above) in any fold
+        splits.append((train_k, held_k))
     orders = sorted({lin.nx if n == 0 else n for n in config.scan_nx})
     degree_sets = sorted({tuple(d) for d in config.scan_degrees}, key=lambda d: (len(d), d))
     equations = tuple(config.scan_equations)

@@ -384,7 +384,8 @@ def _run(
         if n < 1:
             raise ValueError(f"workers must be >= 1; got {n}")
         if n == 1 or len(jobs) == 1:
-            fits = [fit_candidate(c, lin, *sets[k], options) for c, lin, k in jobs]
+            fits = [fit_candidate(c, lin, *sets[k], _split_options(options, k))
+                    for c, lin, k in jobs]  # fmt: skip
             return fits, "serial"
         from dask.distributed import Client, LocalCluster
 
@@ -450,8 +451,16 @@ def _on_client(
     for i in order:
         c, lin, k = jobs[i]
         data_f, val_f = scattered[2 * k], scattered[2 * k + 1]
-        futures[i] = client.submit(fit_candidate, c, lin, data_f, val_f, options, pure=False)
+        futures[i] = client.submit(
+            fit_candidate, c, lin, data_f, val_f, _split_options(options, k), pure=False
+        )
     return [futures[i].result() for i in range(len(jobs))]
+
+
+def _split_options(options: dict[str, Any], k: int) -> dict[str, Any]:
+    """A job's options: only the first split's fits are kept (ScanResult.models); the further
+    splits' fits give their row only, so their models are not shipped back from the workers."""
+    return options if k == 0 else {**options, "keep_model": False}
 
 
 def _size(c: Candidate) -> int:  # relative cost, for the order of submission
@@ -515,7 +524,7 @@ def fit_candidate(
         status,
         candidate.start,
     )
-    return row, model
+    return row, (model if options.get("keep_model", True) else None)
 
 
 def _n_params(model: PNLSSModel) -> int:

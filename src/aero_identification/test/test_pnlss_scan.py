@@ -8,7 +8,13 @@ import pytest
 
 from aero_identification import scan_pnlss
 from aero_identification.data import PeriodicData
-from aero_identification.scan import ScanRow, candidate_grid, cross_fit, select_one_se
+from aero_identification.scan import (
+    ScanRow,
+    candidate_grid,
+    cross_fit,
+    fit_candidate,
+    select_one_se,
+)
 from aero_identification.subspace import fit_linear_ss
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -129,6 +135,12 @@ def test_scan_with_a_second_split_keeps_the_first_splits_models() -> None:
         assert ma is not None and mb is not None
         np.testing.assert_array_equal(ma.E, mb.E)
     assert " / " in two.to_markdown() and "split_errors" in two.to_csv()
+    # A further split's fit gives its row only: its model is not shipped back from a worker.
+    c = candidate_grid(**{k: grid[k] for k in ("nx", "degrees", "equations")})[0]
+    options = {"max_iter": 8, "stress": 1.3, "keep_model": False}
+    row, model = fit_candidate(c, linear[2], val, train, options)
+    assert model is None and row.status == "ok"
+    assert row.validation_error == two.rows[0].split_errors[1]
     two_records = PeriodicData(np.concatenate([val.u, val.u], 2), np.concatenate([val.y, val.y], 2),
                                val.fs, LINES)  # fmt: skip
     with pytest.raises(ValueError, match="split 2: its sets must match"):
