@@ -136,7 +136,7 @@ def test_scan_with_a_second_split_keeps_the_first_splits_models() -> None:
         np.testing.assert_array_equal(ma.E, mb.E)
     assert " / " in two.to_markdown() and "split_errors" in two.to_csv()
     # A further split's fit gives its row only: its model is not shipped back from a worker.
-    c = candidate_grid(**{k: grid[k] for k in ("nx", "degrees", "equations")})[0]
+    c = candidate_grid(nx=(2,), degrees=((2,),), equations=("state",))[0]
     options = {"max_iter": 8, "stress": 1.3, "keep_model": False}
     row, model = fit_candidate(c, linear[2], val, train, options)
     assert model is None and row.status == "ok"
