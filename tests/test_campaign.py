@@ -154,6 +154,15 @@ def test_campaign_ends_by_itself_with_report(campaign) -> None:
     for name in ("models.json", "table1_all_levels.md", "table1_level1.csv", "campaign.json"):
         assert (run / name).exists(), name
     assert list(run.glob("frf_*.png")) and list(run.glob("cl_alpha_*.png"))
+    # Every node on rclpy and as fast as the graph goes: Fast DDS publishes asynchronously
+    # (a third faster); on the DDS backend there is no Fast DDS writer.
+    summary = json.loads((run / "campaign.json").read_text())
+    if graph_env()["RIG_RUNTIME_BACKEND"] == "rclpy":
+        assert summary["fastdds_publication"] == "ASYNCHRONOUS"
+        assert "publishes asynchronously" in proc.stderr
+        assert "ASYNCHRONOUS publication" in (run / "logs" / "sim_wing.log").read_text()
+    else:
+        assert summary["fastdds_publication"] is None
     # Stopped with the graph, the recorder closed the bag once the publishers had left, not on
     # its drain timeout (which would mean it waited for itself or for a node that hung).
     assert "still published" not in (run / "logs" / "recorder.log").read_text()
@@ -294,6 +303,11 @@ def test_mixed_graph_gives_the_same_tables(campaign, tmp_path: Path) -> None:
         assert (run / name).read_bytes() == (campaign[0] / name).read_bytes(), name
     for name in MIXED_NODES:  # each node ran where it was told
         assert f"on {other}" in (run / "logs" / f"{name}.log").read_text(), name
+    # Fast DDS writers with Cyclone DDS readers: rmw_fastrtps's synchronous default, since
+    # asynchronous publication loses the stream's first samples there (docs/design.md §3.5).
+    summary = json.loads((run / "campaign.json").read_text())
+    assert summary["fastdds_publication"] == "SYNCHRONOUS"
+    assert "publishes asynchronously" not in proc.stderr
 
 
 @pytest.mark.timeout(900)

@@ -199,13 +199,14 @@ class Launcher:
             return "all nodes finished"
         return None
 
+    def node_backends(self) -> dict[str, str]:
+        """{node: "rclpy" | "dds"}: the backend each node of the graph runs on."""
+        default = backend_name(dict(self.env))
+        return {s.name: self.backends.get(s.name) or s.backend or default for s in self.graph.nodes}
+
     def lease_s(self) -> float:
         """The longest DDS participant lease among the graph's nodes' backends."""
-        default = backend_name(dict(self.env))
-        return max(
-            participant_lease_s(self.backends.get(s.name) or s.backend or default)
-            for s in self.graph.nodes
-        )
+        return max(participant_lease_s(b) for b in self.node_backends().values())
 
     def stopped(self, now: float | None = None) -> dict[str, float]:
         """{node: seconds it has been stopped} for the nodes whose process is stopped now

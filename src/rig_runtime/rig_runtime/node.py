@@ -182,11 +182,17 @@ class Node:
 
     @property
     def backend_description(self) -> str:
-        """``rclpy (rmw_fastrtps_cpp)`` or ``dds (Cyclone DDS backend)``, for the log."""
+        """``rclpy (rmw_fastrtps_cpp)`` or ``dds (Cyclone DDS backend)``, for the log; with
+        rmw_fastrtps's publication mode when it was chosen (``rclpy (rmw_fastrtps_cpp,
+        ASYNCHRONOUS publication)``)."""
         if self._backend.name == "rclpy":
             from rclpy.utilities import get_rmw_implementation_identifier
 
-            return f"rclpy ({get_rmw_implementation_identifier()})"
+            rmw = get_rmw_implementation_identifier()
+            mode = os.environ.get(ros_environment.PUBLICATION_MODE_ENV)
+            if mode and rmw.startswith("rmw_fastrtps"):
+                return f"rclpy ({rmw}, {mode} publication)"
+            return f"rclpy ({rmw})"
         return "dds (Cyclone DDS backend)"
 
     def resolve_topic(self, topic: str) -> str:

@@ -47,8 +47,10 @@ PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in that file
 # callback sends each sample to every reader. ASYNCHRONOUS (Fast DDS's sending thread) streamed
 # the default campaign at 15.4× real time against 11.6×, but in a mixed graph (generator and
 # plant on rclpy, lift, identifier and recorder on Cyclone DDS) it lost tens of samples right
-# after the start barrier in 3 runs of 3, none in synchronous mode (README, "Known limits").
-# So the rmw's default stays; a user's setting is passed on as it is.
+# after the start barrier in 3 runs of 3, none in synchronous mode (README, "Known limits"):
+# Cyclone starts a reliable session with another implementation's writer at its first
+# heartbeat (docs/design.md §3.5). So this backend leaves the variable as it finds it:
+# `aero-rig campaign` sets it for an all-rclpy graph (ros_environment.asynchronous_publication).
 
 
 def message_class(type_name: str) -> Any:

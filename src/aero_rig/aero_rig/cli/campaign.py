@@ -111,6 +111,16 @@ def main(args: argparse.Namespace) -> int:
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    if args.real_time_factor == 0:  # as fast as the graph takes: throughput, not latency
+        fast = ros_environment.asynchronous_publication(launcher.node_backends().values())
+        if fast:
+            launcher.env.update(fast)
+            print(
+                "aero-rig: every node on rclpy: Fast DDS publishes asynchronously "
+                f"({ros_environment.PUBLICATION_MODE_ENV}; set it to SYNCHRONOUS to keep "
+                "rmw_fastrtps's default)",
+                file=sys.stderr,
+            )
     outcome = launch_and_monitor(launcher, backend, timeout=args.timeout, quiet=args.quiet)
     recovered = None
     if outcome.stalled and not launcher.failure:
@@ -135,9 +145,12 @@ def main(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_FAILED
+    rclpy_nodes = "rclpy" in launcher.node_backends().values()
     return summarise(
-        run_dir, backend, outcome, allow_excluded=args.allow_excluded, recovered=recovered
-    )
+        run_dir, backend, outcome, allow_excluded=args.allow_excluded, recovered=recovered,
+        publication=(launcher.env.get(ros_environment.PUBLICATION_MODE_ENV, "SYNCHRONOUS")
+                     if rclpy_nodes else None),
+    )  # fmt: skip
 
 
 def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dict[str, Any]]:
@@ -322,8 +335,10 @@ def summarise(
     *,
     allow_excluded: bool,
     recovered: dict[str, Any] | None = None,
+    publication: str | None = None,
 ) -> int:
-    """Judge a finished run, write campaign.json, print the results; the exit code."""
+    """Judge a finished run, write campaign.json, print the results; the exit code.
+    ``publication``: rmw_fastrtps's publication mode of the rclpy nodes (None: none on rclpy)."""
     bad = {n: c for n, c in outcome.codes.items() if c not in (0, -2, 130)}
     if not (run_dir / "table1_all_levels.md").exists():
         print(
@@ -340,6 +355,7 @@ def summarise(
     summary = {
         "wall_s": round(outcome.wall, 1),
         "backend": backend,
+        "fastdds_publication": publication,
         "experiment_s": round(experiment_s, 1) if experiment_s else None,
         "real_time_factor": round(experiment_s / outcome.wall, 1) if experiment_s else None,
         "exit_codes": outcome.codes,
