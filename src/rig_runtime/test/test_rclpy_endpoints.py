@@ -160,8 +160,12 @@ def test_logs_reach_rosout(rclpy_env: None) -> None:
     watcher = Node("rosout_watcher", argv=[])
     got: list[Any] = []
     try:
+        # Transient local, as rcl's /rosout writers are (depth 1000, lifespan 10 s): the reader's
+        # side of a match can complete before the writer's, and a volatile reader then misses
+        # a record written in between (it failed that way once under load); a transient-local
+        # one gets it from the writer's history when the writer side matches.
         watcher.create_subscription(
-            "rcl_interfaces/msg/Log", "/rosout", got.append, qos="default", depth=100
+            "rcl_interfaces/msg/Log", "/rosout", got.append, qos="latched", depth=100
         )
         # Matched with both nodes' /rosout writers (its own and the speaker's).
         assert watcher.spin_until(
