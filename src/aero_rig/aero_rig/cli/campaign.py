@@ -111,8 +111,9 @@ def main(args: argparse.Namespace) -> int:
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    node_backends = launcher.node_backends().values()
     if args.real_time_factor == 0:  # as fast as the graph takes: throughput, not latency
-        fast = ros_environment.asynchronous_publication(launcher.node_backends().values())
+        fast = ros_environment.asynchronous_publication(node_backends)
         if fast:
             launcher.env.update(fast)
             print(
@@ -145,11 +146,10 @@ def main(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_FAILED
-    rclpy_nodes = "rclpy" in launcher.node_backends().values()
     return summarise(
         run_dir, backend, outcome, allow_excluded=args.allow_excluded, recovered=recovered,
         publication=(launcher.env.get(ros_environment.PUBLICATION_MODE_ENV, "SYNCHRONOUS")
-                     if rclpy_nodes else None),
+                     if "rclpy" in node_backends else None),
     )  # fmt: skip
 
 
