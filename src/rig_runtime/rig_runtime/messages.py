@@ -8,6 +8,7 @@ CDR bytes come from its ``serialize_cdr`` and type hashes from its ``hash_rihs01
 
 import dataclasses
 import functools
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -98,24 +99,36 @@ def type_hash(type_name: str) -> str:
     return typestore().hash_rihs01(normalize_type_name(type_name))
 
 
-def _default_field(node: tuple[Any, Any]) -> Any:
+def _default_maker(node: tuple[Any, Any]) -> Callable[[], Any]:
+    """A function that returns a fresh ROS default value of one field (built once per type)."""
     nodetype, rest = node
     if nodetype == Nodetype.BASE:
         base = rest[0]
-        if base == "string":
-            return ""
-        if base == "bool":
-            return False
-        return 0.0 if base.startswith("float") else 0
+        value: Any = "" if base == "string" else False if base == "bool" else 0
+        if base.startswith("float"):
+            value = 0.0
+        return lambda: value  # immutable
     if nodetype == Nodetype.NAME:
-        return new_message(rest)
+        return _factory(rest)
     sub, length = rest
     if sub[0] == Nodetype.BASE and sub[1][0] in _NUMPY_DTYPES:
         count = length if nodetype == Nodetype.ARRAY else 0
-        return np.zeros(count, dtype=_NUMPY_DTYPES[sub[1][0]])
+        dtype = _NUMPY_DTYPES[sub[1][0]]
+        return lambda: np.zeros(count, dtype=dtype)
     if nodetype == Nodetype.ARRAY:
-        return [_default_field(sub) for _ in range(length)]
-    return []
+        item = _default_maker(sub)
+        return lambda: [item() for _ in range(length)]
+    return list
+
+
+@functools.cache
+def _factory(name: str) -> Callable[[], Any]:
+    """``name``'s message with every field at its ROS default: the type tree is walked once,
+    since stream nodes build one message per sample."""
+    _, fielddefs = typestore().fielddefs[name]
+    cls = typestore().types[name]
+    makers = [(field_name, _default_maker(node)) for field_name, node in fielddefs]
+    return lambda: cls(**{field_name: make() for field_name, make in makers})
 
 
 def new_message(type_name: str, **fields: Any) -> Any:
@@ -125,18 +138,17 @@ def new_message(type_name: str, **fields: Any) -> Any:
     dtype), nested messages are constructed with defaults (``msg.header.stamp.sec = 1``).
     """
     name = normalize_type_name(type_name)
-    _, fielddefs = typestore().fielddefs[name]
-    values: dict[str, Any] = {}
-    for field_name, node in fielddefs:
-        if field_name in fields:
-            values[field_name] = _coerce(node, fields.pop(field_name))
-        else:
-            values[field_name] = _default_field(node)
+    msg = _factory(name)()
     if fields:
-        raise TypeError(
-            f"{name} has no field(s) {sorted(fields)}; fields are {[f for f, _ in fielddefs]}"
-        )
-    return typestore().types[name](**values)
+        _, fielddefs = typestore().fielddefs[name]
+        for field_name, node in fielddefs:
+            if field_name in fields:
+                setattr(msg, field_name, _coerce(node, fields.pop(field_name)))
+        if fields:
+            raise TypeError(
+                f"{name} has no field(s) {sorted(fields)}; fields are {[f for f, _ in fielddefs]}"
+            )
+    return msg
 
 
 def _coerce(node: tuple[Any, Any], value: Any) -> Any:
@@ -149,24 +161,52 @@ def _coerce(node: tuple[Any, Any], value: Any) -> Any:
     return value
 
 
-def _prepare(msg: Any) -> None:
-    """Make user-assigned fields serialisable: lists/scalars in primitive sequences -> numpy."""
-    name = msg.__msgtype__
+@functools.cache
+def _preparer(name: str) -> Callable[[Any], None] | None:
+    """What :func:`_prepare` does to a ``name`` message, worked out once per type: None when no
+    field of the type (or of its nested types) can need a conversion."""
     _, fielddefs = typestore().fielddefs[name]
-    for field_name, node in fielddefs:
-        nodetype, rest = node
-        value = getattr(msg, field_name)
+    steps: list[Callable[[Any], None]] = []
+    for field_name, (nodetype, rest) in fielddefs:
         if nodetype == Nodetype.NAME:
-            _prepare(value)
+            nested = _preparer(rest)
+            if nested is not None:
+                steps.append(lambda msg, f=field_name, p=nested: p(getattr(msg, f)))
         elif nodetype in (Nodetype.ARRAY, Nodetype.SEQUENCE):
             sub = rest[0]
             if sub[0] == Nodetype.BASE and sub[1][0] in _NUMPY_DTYPES:
-                dtype = _NUMPY_DTYPES[sub[1][0]]
-                if not (isinstance(value, np.ndarray) and value.dtype == dtype):
-                    setattr(msg, field_name, np.ascontiguousarray(value, dtype=dtype))
+                steps.append(
+                    lambda msg, f=field_name, d=np.dtype(_NUMPY_DTYPES[sub[1][0]]): _as_array(
+                        msg, f, d
+                    )
+                )
             elif sub[0] == Nodetype.NAME:
-                for item in value:
-                    _prepare(item)
+                nested = _preparer(sub[1])
+                if nested is not None:
+                    steps.append(
+                        lambda msg, f=field_name, p=nested: [p(item) for item in getattr(msg, f)]
+                    )
+    if not steps:
+        return None
+
+    def prepare(msg: Any) -> None:
+        for step in steps:
+            step(msg)
+
+    return prepare
+
+
+def _as_array(msg: Any, field_name: str, dtype: np.dtype) -> None:
+    value = getattr(msg, field_name)
+    if not (isinstance(value, np.ndarray) and value.dtype == dtype):
+        setattr(msg, field_name, np.ascontiguousarray(value, dtype=dtype))
+
+
+def _prepare(msg: Any) -> None:
+    """Make user-assigned fields serialisable: lists/scalars in primitive sequences -> numpy."""
+    prepare = _preparer(msg.__msgtype__)
+    if prepare is not None:
+        prepare(msg)
 
 
 def serialize(msg: Any) -> bytes:

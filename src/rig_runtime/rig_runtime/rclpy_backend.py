@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from .barrier import Endpoint
-from .messages import deserialize, normalize_type_name, serialize
+from .messages import deserialize, new_message, normalize_type_name, serialize
 from .names import ArgumentError
 from .params import Parameter, ParameterError, ParameterSet, assign, default_parameters
 from .qos import QosProfile
@@ -396,8 +396,6 @@ class RclpyBackend:
         return self.node.create_timer(period_s, callback)
 
     def new_message(self, type_name: str, **fields: Any) -> Any:
-        from .messages import new_message
-
         return new_message(type_name, **fields)
 
     def spin_once(self, timeout_s: float) -> int:
