@@ -161,31 +161,49 @@ def _coerce(node: tuple[Any, Any], value: Any) -> Any:
     return value
 
 
+Step = Callable[[Any], None]
+
+
+def _nested_step(field_name: str, prepare: Step) -> Step:
+    return lambda msg: prepare(getattr(msg, field_name))
+
+
+def _array_step(field_name: str, dtype: np.dtype) -> Step:
+    def step(msg: Any) -> None:
+        value = getattr(msg, field_name)
+        if not (isinstance(value, np.ndarray) and value.dtype == dtype):
+            setattr(msg, field_name, np.ascontiguousarray(value, dtype=dtype))
+
+    return step
+
+
+def _items_step(field_name: str, prepare: Step) -> Step:
+    def step(msg: Any) -> None:
+        for item in getattr(msg, field_name):
+            prepare(item)
+
+    return step
+
+
 @functools.cache
-def _preparer(name: str) -> Callable[[Any], None] | None:
+def _preparer(name: str) -> Step | None:
     """What :func:`_prepare` does to a ``name`` message, worked out once per type: None when no
     field of the type (or of its nested types) can need a conversion."""
     _, fielddefs = typestore().fielddefs[name]
-    steps: list[Callable[[Any], None]] = []
+    steps: list[Step] = []
     for field_name, (nodetype, rest) in fielddefs:
         if nodetype == Nodetype.NAME:
             nested = _preparer(rest)
             if nested is not None:
-                steps.append(lambda msg, f=field_name, p=nested: p(getattr(msg, f)))
+                steps.append(_nested_step(field_name, nested))
         elif nodetype in (Nodetype.ARRAY, Nodetype.SEQUENCE):
             sub = rest[0]
             if sub[0] == Nodetype.BASE and sub[1][0] in _NUMPY_DTYPES:
-                steps.append(
-                    lambda msg, f=field_name, d=np.dtype(_NUMPY_DTYPES[sub[1][0]]): _as_array(
-                        msg, f, d
-                    )
-                )
+                steps.append(_array_step(field_name, np.dtype(_NUMPY_DTYPES[sub[1][0]])))
             elif sub[0] == Nodetype.NAME:
                 nested = _preparer(sub[1])
                 if nested is not None:
-                    steps.append(
-                        lambda msg, f=field_name, p=nested: [p(item) for item in getattr(msg, f)]
-                    )
+                    steps.append(_items_step(field_name, nested))
     if not steps:
         return None
 
@@ -194,12 +212,6 @@ def _preparer(name: str) -> Callable[[Any], None] | None:
             step(msg)
 
     return prepare
-
-
-def _as_array(msg: Any, field_name: str, dtype: np.dtype) -> None:
-    value = getattr(msg, field_name)
-    if not (isinstance(value, np.ndarray) and value.dtype == dtype):
-        setattr(msg, field_name, np.ascontiguousarray(value, dtype=dtype))
 
 
 def _prepare(msg: Any) -> None:
