@@ -52,8 +52,41 @@ class ClusterResult:
 FEATURE_BINS = 20  # equal-count angle-of-attack bins of the lift-curve features
 
 
-def period_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarray:
-    """Feature vector of every period: its lift curve C_l(α) minus its realization's median one.
+def _lift_curves(data: PeriodicData, values: np.ndarray, bins: int) -> np.ndarray:
+    """(P, M, bins) mean of `values` (N, P, M) in each of `bins` equal-count bins of the input
+    (edges: quantiles of the input over all periods and realizations)."""
+    if bins < 2:
+        raise ValueError(f"bins must be >= 2; got {bins}")
+    edges = np.quantile(data.u, np.linspace(0.0, 1.0, bins + 1)[1:-1])
+    # One bincount over all periods: sample (n, p, m) goes to slot (p·M + m)·bins + its bin.
+    period = np.arange(data.P * data.M).reshape(data.P, data.M)
+    slot = (np.searchsorted(edges, data.u, side="right") + bins * period).ravel()
+    size = data.P * data.M * bins
+    counts = np.bincount(slot, minlength=size).reshape(data.P, data.M, bins)
+    sums = np.bincount(slot, weights=values.ravel(), minlength=size).reshape(counts.shape)
+    with np.errstate(invalid="ignore"):
+        curves = sums / counts  # NaN in a bin a period never visits
+    # A bin a period never visits takes its realization's mean there (or zero deviation).
+    if np.isnan(curves).any():
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # bins no period visits
+            fill = np.nanmean(curves, axis=0, keepdims=True)
+        curves = np.nan_to_num(np.where(np.isnan(curves), fill, curves))
+    return curves
+
+
+def _scaled(X: np.ndarray) -> np.ndarray:
+    """Features divided by one common scale (not z-scored per bin: bins where nothing differs
+    keep a small weight)."""
+    scale = np.sqrt(np.mean(X**2))
+    return X / scale if scale > 0 else X
+
+
+def period_features(
+    data: PeriodicData, bins: int = FEATURE_BINS, reference: np.ndarray | None = None
+) -> np.ndarray:
+    """Feature vector of every period: its lift curve C_l(α) minus its realization's reference
+    curve, the median lift curve of the realization's `reference` periods.
 
     A period's lift curve is the mean output in each of `bins` equal-count bins of the input
     (bin edges: quantiles of the input over all periods and realizations). The periods of a
@@ -73,35 +106,91 @@ def period_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarray:
     0.62-0.72 on the same data, with the light-stall periods in the minority clusters, and stay
     below 0.5 at 6.6° and 15.7° (0.84 on the default campaign's high level).
 
-    The realization's median lift curve is subtracted because the lift curve of a multisine
-    also depends on its phase realization (dynamics, hysteresis); periods of the realization's
-    majority regime then sit near zero in every realization. The features are divided by one
-    common scale, not z-scored per bin, so bins where nothing differs keep a small weight.
+    A reference curve per realization is subtracted because the lift curve of a multisine also
+    depends on its phase realization (dynamics, hysteresis). The reference must be the same
+    regime in every realization, or a regime that is the majority in one realization and the
+    minority in another ends up in the dominant cluster of both (`common_regime` gives such
+    periods; default: every period, each realization's median).
+
+    Args:
+        data: periodic records (N, P, M).
+        bins: angle-of-attack bins.
+        reference: (P, M) bool, the periods whose median lift curve is their realization's
+            reference; a realization without any takes all its periods.
 
     Returns:
         (P·M, bins) array, rows ordered as (p, m) in C order (row p·M + m).
     """
-    if bins < 2:
-        raise ValueError(f"bins must be >= 2; got {bins}")
-    edges = np.quantile(data.u, np.linspace(0.0, 1.0, bins + 1)[1:-1])
-    # One bincount over all periods: sample (n, p, m) goes to slot (p·M + m)·bins + its bin.
-    period = np.arange(data.P * data.M).reshape(data.P, data.M)
-    slot = (np.searchsorted(edges, data.u, side="right") + bins * period).ravel()
-    size = data.P * data.M * bins
-    counts = np.bincount(slot, minlength=size).reshape(data.P, data.M, bins)
-    sums = np.bincount(slot, weights=data.y.ravel(), minlength=size).reshape(counts.shape)
-    with np.errstate(invalid="ignore"):
-        curves = sums / counts  # NaN in a bin a period never visits
-    # A bin a period never visits takes its realization's mean there (or zero deviation).
-    if np.isnan(curves).any():
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # bins no period visits
-            fill = np.nanmean(curves, axis=0, keepdims=True)
-        curves = np.nan_to_num(np.where(np.isnan(curves), fill, curves))
-    deviation = curves - np.median(curves, axis=0, keepdims=True)
-    X = deviation.reshape(data.P * data.M, bins)
-    scale = np.sqrt(np.mean(X**2))
-    return X / scale if scale > 0 else X
+    curves = _lift_curves(data, data.y, bins)
+    refs = []
+    for m in range(data.M):
+        rows = reference[:, m] if reference is not None else np.ones(data.P, dtype=bool)
+        refs.append(np.median(curves[rows if rows.any() else slice(None), m, :], axis=0))
+    deviation = curves - np.stack(refs)[None, :, :]
+    return _scaled(deviation.reshape(data.P * data.M, bins))
+
+
+def residual_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarray:
+    """Features that need no reference per realization: each period's lift curve of what the
+    level's best linear approximation leaves unexplained, minus the median over all periods.
+
+    The residual is y − ŷ with ŷ = G_BLA·U at the excited lines and the mean output of the level
+    at DC (G_BLA: the mean of Y/U over every period and realization, Pintelon & Schoukens 2012
+    §3.4), so the linear dynamics, which differ between phase realizations, are taken out by
+    one model for all of them. A regime shifts the residual's lift curve (the level of C_l, the
+    high-α bins) in every realization alike. What is left of the realization in it (the
+    nonlinear distortion, which depends on the phases) can still split the periods by
+    realization; `common_regime` therefore never accepts such a split.
+
+    Returns:
+        (P·M, bins) array, rows ordered as (p, m) in C order (row p·M + m).
+    """
+    lines = data.excited_lines
+    U = np.fft.rfft(data.u, axis=0)
+    Y = np.fft.rfft(data.y, axis=0)
+    Y_hat = np.zeros_like(Y)
+    Y_hat[lines] = np.mean(Y[lines] / U[lines], axis=(1, 2))[:, None, None] * U[lines]
+    Y_hat[0] = np.mean(Y[0])
+    residual = data.y - np.fft.irfft(Y_hat, n=data.N, axis=0)
+    curves = _lift_curves(data, residual, bins).reshape(data.P * data.M, bins)
+    return _scaled(curves - np.median(curves, axis=0))
+
+
+def common_regime(
+    data: PeriodicData,
+    kmax: int = 6,
+    min_silhouette: float = 0.5,
+    random_state: int = 0,
+    n_init: int = 10,
+) -> np.ndarray:
+    """(P, M) bool: the periods of the regime that every realization shares, for the reference
+    curves of `period_features`.
+
+    k-means on `residual_features`, k chosen by the silhouette as in `period_clusters`, among the
+    k whose dominant cluster holds periods of every realization: a dominant cluster of one
+    realization cannot be told from that realization's own signature. Every period when no k
+    qualifies or the level has one realization.
+
+    Why: with each realization's median as its reference, a level whose regimes are the
+    majority of different realizations (plant seed 1 of the default campaign: realization 0 in
+    light stall for 4 of its 6 periods at 19.9°, realization 1 in deep stall for 5) kept light
+    stall from one realization and deep stall from the other as one "dominant" cluster, and the
+    PNLSS was trained on one regime and validated on the other (validation error 0.9, high-offset
+    sines 0.85-0.93 against the BLA SS's 0.49-0.56). On the default plan simulated with plant
+    seeds 0-23 (`aero_rig.simulation`, light-stall truth per period), the high level's kept
+    periods mixed the two regimes for seeds 1, 8 and 11 before, and for none with these
+    references; the low and medium levels cluster as before except one seed (README, "Stall
+    regimes and clustering").
+    """
+    everything = np.ones((data.P, data.M), dtype=bool)
+    if data.M < 2:
+        return everything
+    Z = _principal_coordinates(residual_features(data), None)
+    realization = np.tile(np.arange(data.M), data.P)  # of row p·M + m
+    silhouettes, k, labels = _best_kmeans(Z, kmax, n_init, random_state, realization)
+    if silhouettes.get(k, -np.inf) < min_silhouette:
+        return everything
+    return (labels == 0).reshape(data.P, data.M)
 
 
 def period_clusters(
@@ -141,13 +230,14 @@ def period_clusters(
         raise ValueError(f"min_silhouette must lie in (0, 1); got {min_silhouette}")
     if n_components is not None and n_components < 1:
         raise ValueError(f"n_components must be >= 1 or None; got {n_components}")
-    X = period_features(data)
+    reference = common_regime(data, kmax, min_silhouette, random_state, n_init)
+    X = period_features(data, reference=reference)
     n = X.shape[0]
     Z = _principal_coordinates(X, n_components)
     silhouettes, best_k, best_labels = _best_kmeans(Z, kmax, n_init, random_state)
     if silhouettes.get(best_k, -np.inf) < min_silhouette:
         best_k, best_labels = 1, np.zeros(n, dtype=np.int64)
-    labels = _relabel_by_size(Z, best_labels, best_k)
+    labels = best_labels
     sizes = np.bincount(labels, minlength=best_k)
     labels_pm = labels.reshape(data.P, data.M)
     return ClusterResult(
@@ -173,10 +263,16 @@ def _principal_coordinates(X: np.ndarray, n_components: int | None) -> np.ndarra
 
 
 def _best_kmeans(
-    Z: np.ndarray, kmax: int, n_init: int, random_state: int
+    Z: np.ndarray,
+    kmax: int,
+    n_init: int,
+    random_state: int,
+    realization: np.ndarray | None = None,
 ) -> tuple[dict[int, float], int, np.ndarray]:
-    """k-means for k = 2 … min(kmax, n − 1): (silhouette per k, best k, its labels); best k is
-    1 with all-zero labels when no k could be tried."""
+    """k-means for k = 2 … min(kmax, n − 1): (silhouette per k, best k, its labels numbered by
+    `_relabel_by_size`); best k is 1 with all-zero labels when no k could be tried. With
+    `realization` (of each row), only a k whose dominant cluster holds every realization can be
+    best (`common_regime`)."""
     n = Z.shape[0]
     silhouettes: dict[int, float] = {}
     best_k, best_s, best_labels = 1, -np.inf, np.zeros(n, dtype=np.int64)
@@ -187,9 +283,15 @@ def _best_kmeans(
         if np.unique(km.labels_).size < k:
             continue  # fewer distinct points than clusters
         sil = float(silhouette_score(Z, km.labels_))
+        labels = _relabel_by_size(Z, km.labels_, k)
+        if (
+            realization is not None
+            and np.unique(realization[labels == 0]).size < np.unique(realization).size
+        ):
+            continue  # the dominant cluster misses a realization
         silhouettes[k] = sil
         if sil > best_s:
-            best_k, best_s, best_labels = k, sil, km.labels_
+            best_k, best_s, best_labels = k, sil, labels
     return silhouettes, best_k, best_labels
 
 

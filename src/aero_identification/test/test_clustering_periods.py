@@ -3,7 +3,7 @@
 import numpy as np
 
 from aero_identification import PeriodicData, cluster_periods
-from aero_identification.clustering import period_clusters
+from aero_identification.clustering import common_regime, period_clusters
 from aero_identification.data import random_phase_period
 
 N = 400
@@ -71,6 +71,34 @@ def test_regimes_across_realizations_are_matched_not_split_by_realization() -> N
     np.testing.assert_array_equal(keep, expected)
     kept = data.select(keep)
     assert (kept.P, kept.M) == (4, 2)  # truncated to the same count per realization
+
+
+def test_a_regime_that_is_one_realizations_majority_and_the_others_minority_is_not_kept() -> None:
+    # Realization 0 stalls in 4 of its 6 periods, realization 1 in 1 of 6 (plant seed 1 of the
+    # default campaign at 19.9°). Each realization's own median lift curve is then a different
+    # regime; the kept periods must still be one regime in both realizations.
+    rng = np.random.default_rng(5)
+    stalled = {(2, 0), (3, 0), (4, 0), (5, 0), (0, 1)}
+    data = regime_data(rng, P=6, M=2, other_regime=stalled, sigma=0.05)
+    result = period_clusters(data)
+    expected = np.ones((6, 2), dtype=bool)
+    for p, m in stalled:
+        expected[p, m] = False
+    np.testing.assert_array_equal(result.keep, expected)
+    assert result.k == 2 and result.sizes.tolist() == [7, 5]
+
+
+def test_the_common_regime_never_is_one_realization_alone() -> None:
+    # Homogeneous periods whose realizations differ by a signature (an offset per realization,
+    # larger than the noise): the residual features split them by realization, which
+    # common_regime must not take as a regime.
+    rng = np.random.default_rng(6)
+    data = regime_data(rng, P=6, M=2, other_regime=set(), sigma=0.02)
+    shifted = data.y.copy()
+    shifted[:, :, 1] += 0.2 * np.abs(data.u[:, :, 1])
+    data = PeriodicData(data.u, shifted, data.fs, data.excited_lines)
+    assert np.all(common_regime(data))
+    assert period_clusters(data).k == 1
 
 
 def test_identical_periods_without_noise_are_one_cluster() -> None:
