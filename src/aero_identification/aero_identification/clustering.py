@@ -179,8 +179,7 @@ def common_regime(
     sines 0.85-0.93 against the BLA SS's 0.49-0.56). On the default plan simulated with plant
     seeds 0-23 (`aero_rig.simulation`, light-stall truth per period), the high level's kept
     periods mixed the two regimes for seeds 1, 8 and 11 before, and for none with these
-    references; the low and medium levels cluster as before except one seed (README, "Stall
-    regimes and clustering").
+    references; the low and medium levels cluster exactly as before (docs/design.md §7.3).
     """
     everything = np.ones((data.P, data.M), dtype=bool)
     if data.M < 2:
