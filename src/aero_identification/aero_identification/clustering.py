@@ -145,9 +145,12 @@ def residual_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarra
     Returns:
         (P·M, bins) array, rows ordered as (p, m) in C order (row p·M + m).
     """
-    lines = data.excited_lines
     U = np.fft.rfft(data.u, axis=0)
     Y = np.fft.rfft(data.y, axis=0)
+    # Lines the input does not excite in every period carry no estimate of G (their ratio
+    # would be noise over nothing): they are left to the residual.
+    U_min = np.min(np.abs(U[data.excited_lines]), axis=(1, 2))
+    lines = data.excited_lines[U_min > 1e-9 * max(float(np.max(U_min, initial=0.0)), 1e-300)]
     Y_hat = np.zeros_like(Y)
     Y_hat[lines] = np.mean(Y[lines] / U[lines], axis=(1, 2))[:, None, None] * U[lines]
     Y_hat[0] = np.mean(Y[0])

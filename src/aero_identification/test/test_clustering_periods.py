@@ -3,7 +3,7 @@
 import numpy as np
 
 from aero_identification import PeriodicData, cluster_periods
-from aero_identification.clustering import common_regime, period_clusters
+from aero_identification.clustering import common_regime, period_clusters, residual_features
 from aero_identification.data import random_phase_period
 
 N = 400
@@ -99,6 +99,18 @@ def test_the_common_regime_never_is_one_realization_alone() -> None:
     data = PeriodicData(data.u, shifted, data.fs, data.excited_lines)
     assert np.all(common_regime(data))
     assert period_clusters(data).k == 1
+
+
+def test_a_listed_line_without_input_power_stays_out_of_the_residuals_linear_model() -> None:
+    # Records may list an excited line the input does not carry (here an even line of an
+    # odd multisine): it must not enter the linear model of the residual features.
+    rng = np.random.default_rng(7)
+    stalled = {(2, 0), (3, 0), (4, 0), (5, 0), (0, 1)}
+    data = regime_data(rng, P=6, M=2, other_regime=stalled, sigma=0.05)
+    listed = PeriodicData(data.u, data.y, data.fs, np.sort(np.append(data.excited_lines, 2)))
+    np.testing.assert_allclose(residual_features(listed), residual_features(data), atol=1e-9)
+    keep = period_clusters(listed).keep
+    assert not any(keep[p, m] for p, m in stalled) and keep.sum() == 7
 
 
 def test_identical_periods_without_noise_are_one_cluster() -> None:
