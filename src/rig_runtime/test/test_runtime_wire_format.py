@@ -82,3 +82,39 @@ def test_new_message_defaults_and_errors() -> None:
         new_message("sensor_msgs/msg/NoSuchType")
     with pytest.raises(TypeError, match="no field"):
         new_message("std_msgs/msg/String", text="x")
+
+
+def test_messages_from_the_cached_factory_share_no_mutable_state() -> None:
+    # The factory is built once per type: each message must still get its own nested
+    # messages, arrays and lists, or a stream node would overwrite the one it just published.
+    a = new_message("sensor_msgs/msg/JointState")
+    b = new_message("sensor_msgs/msg/JointState")
+    assert a.header is not b.header and a.header.stamp is not b.header.stamp
+    assert a.position is not b.position and a.name is not b.name
+    a.header.stamp.sec = 5
+    a.name.append("pitch")
+    assert b.header.stamp.sec == 0 and b.name == []
+    imu = new_message("sensor_msgs/msg/Imu")  # fixed-size float64[9] arrays
+    assert imu.orientation_covariance.shape == (9,)
+    assert (
+        imu.orientation_covariance is not new_message("sensor_msgs/msg/Imu").orientation_covariance
+    )
+
+
+def test_lists_assigned_anywhere_in_a_message_are_serialised_as_its_arrays() -> None:
+    # Serialisation's preparation is worked out once per type, nested types included.
+    array = new_message("diagnostic_msgs/msg/DiagnosticArray")
+    array.status = [new_message("diagnostic_msgs/msg/DiagnosticStatus", name="a")]
+    js = new_message("sensor_msgs/msg/JointState")
+    js.position = [0.5, 1.5]  # a list, not an array
+    js.effort = (2.0,)
+    back = deserialize(serialize(js), "sensor_msgs/msg/JointState")
+    np.testing.assert_array_equal(back.position, [0.5, 1.5])
+    np.testing.assert_array_equal(back.effort, [2.0])
+    assert (
+        deserialize(serialize(array), "diagnostic_msgs/msg/DiagnosticArray").status[0].name == "a"
+    )
+    cloud = new_message("sensor_msgs/msg/PointCloud2")
+    cloud.fields = [new_message("sensor_msgs/msg/PointField", name="x", datatype=7, count=1)]
+    cloud.data = [1, 2, 3]
+    assert deserialize(serialize(cloud), "sensor_msgs/msg/PointCloud2").data.tolist() == [1, 2, 3]
