@@ -116,12 +116,21 @@ def detection_lines(excited_lines: np.ndarray, max_line: int) -> tuple[np.ndarra
     return grid[h % 2 == 1], grid[h % 2 == 0]
 
 
+def weak_lines(U_abs: np.ndarray) -> np.ndarray:
+    """(F,) bool: lines without input power in some column of the (F, ...) |U|, more than
+    120 dB below the strongest (Y/U would be inf or noise over noise there)."""
+    U_abs = U_abs.reshape(U_abs.shape[0], -1)
+    if U_abs.size == 0 or U_abs.max() <= 0:
+        return np.ones(U_abs.shape[0], dtype=bool)
+    return np.any(U_abs <= 1e-6 * U_abs.max(), axis=1)
+
+
 def _check_input_power(U_abs: np.ndarray, lines: np.ndarray) -> None:
-    """Refuse lines without input power (Y/U would be inf or noise over noise)."""
-    weak = np.any(U_abs <= 1e-6 * U_abs.max(), axis=1) if U_abs.max() > 0 else np.ones(lines.size)
+    """Refuse lines without input power (`weak_lines`)."""
+    weak = weak_lines(U_abs)
     if np.any(weak):
         raise ValueError(
-            f"the input has (almost) no power at excited line(s) {lines[weak.astype(bool)][:10]}"
+            f"the input has (almost) no power at excited line(s) {lines[weak][:10]}"
             " (more than 120 dB below the strongest line); check excited_lines against the "
             "excitation plan (they are DFT bins of one period: frequency·N/fs)"
         )

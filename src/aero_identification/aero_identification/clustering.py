@@ -16,6 +16,7 @@ import numpy as np
 from sklearn.cluster import KMeans
 from sklearn.metrics import silhouette_score
 
+from aero_identification.bla import weak_lines
 from aero_identification.data import PeriodicData
 
 
@@ -145,16 +146,14 @@ def residual_features(data: PeriodicData, bins: int = FEATURE_BINS) -> np.ndarra
     Returns:
         (P·M, bins) array, rows ordered as (p, m) in C order (row p·M + m).
     """
-    U = np.fft.rfft(data.u, axis=0)
-    Y = np.fft.rfft(data.y, axis=0)
+    U, Y = data.U, data.Y  # (N//2+1, P, M), unitary scaling
     # Lines the input does not excite in every period carry no estimate of G (their ratio
     # would be noise over nothing): they are left to the residual.
-    U_min = np.min(np.abs(U[data.excited_lines]), axis=(1, 2))
-    lines = data.excited_lines[U_min > 1e-9 * max(float(np.max(U_min, initial=0.0)), 1e-300)]
+    lines = data.excited_lines[~weak_lines(np.abs(U[data.excited_lines]))]
     Y_hat = np.zeros_like(Y)
     Y_hat[lines] = np.mean(Y[lines] / U[lines], axis=(1, 2))[:, None, None] * U[lines]
     Y_hat[0] = np.mean(Y[0])
-    residual = data.y - np.fft.irfft(Y_hat, n=data.N, axis=0)
+    residual = data.y - np.fft.irfft(Y_hat, n=data.N, axis=0) * np.sqrt(data.N)
     curves = _lift_curves(data, residual, bins).reshape(data.P * data.M, bins)
     return _scaled(curves - np.median(curves, axis=0))
 
@@ -239,9 +238,8 @@ def period_clusters(
     silhouettes, best_k, best_labels = _best_kmeans(Z, kmax, n_init, random_state)
     if silhouettes.get(best_k, -np.inf) < min_silhouette:
         best_k, best_labels = 1, np.zeros(n, dtype=np.int64)
-    labels = best_labels
-    sizes = np.bincount(labels, minlength=best_k)
-    labels_pm = labels.reshape(data.P, data.M)
+    sizes = np.bincount(best_labels, minlength=best_k)
+    labels_pm = best_labels.reshape(data.P, data.M)
     return ClusterResult(
         labels=labels_pm,
         keep=labels_pm == 0,

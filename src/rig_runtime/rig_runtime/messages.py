@@ -122,13 +122,19 @@ def _default_maker(node: tuple[Any, Any]) -> Callable[[], Any]:
 
 
 @functools.cache
-def _factory(name: str) -> Callable[[], Any]:
-    """``name``'s message with every field at its ROS default: the type tree is walked once,
-    since stream nodes build one message per sample."""
+def _makers(name: str) -> tuple[Any, list[tuple[str, Any, Callable[[], Any]]]]:
+    """``name``'s class and, per field, its type node and default maker: the type tree is
+    walked once, since stream nodes build one message per sample."""
     _, fielddefs = typestore().fielddefs[name]
-    cls = typestore().types[name]
-    makers = [(field_name, _default_maker(node)) for field_name, node in fielddefs]
-    return lambda: cls(**{field_name: make() for field_name, make in makers})
+    makers = [(field_name, node, _default_maker(node)) for field_name, node in fielddefs]
+    return typestore().types[name], makers
+
+
+@functools.cache
+def _factory(name: str) -> Callable[[], Any]:
+    """``name``'s message with every field at its ROS default."""
+    cls, makers = _makers(name)
+    return lambda: cls(**{field_name: make() for field_name, _, make in makers})
 
 
 def new_message(type_name: str, **fields: Any) -> Any:
@@ -138,17 +144,18 @@ def new_message(type_name: str, **fields: Any) -> Any:
     dtype), nested messages are constructed with defaults (``msg.header.stamp.sec = 1``).
     """
     name = normalize_type_name(type_name)
-    msg = _factory(name)()
+    if not fields:
+        return _factory(name)()
+    cls, makers = _makers(name)
+    values = {
+        field_name: _coerce(node, fields.pop(field_name)) if field_name in fields else make()
+        for field_name, node, make in makers
+    }
     if fields:
-        _, fielddefs = typestore().fielddefs[name]
-        for field_name, node in fielddefs:
-            if field_name in fields:
-                setattr(msg, field_name, _coerce(node, fields.pop(field_name)))
-        if fields:
-            raise TypeError(
-                f"{name} has no field(s) {sorted(fields)}; fields are {[f for f, _ in fielddefs]}"
-            )
-    return msg
+        raise TypeError(
+            f"{name} has no field(s) {sorted(fields)}; fields are {[f for f, _, _ in makers]}"
+        )
+    return cls(**values)
 
 
 def _coerce(node: tuple[Any, Any], value: Any) -> Any:
