@@ -15,8 +15,9 @@ sim_actuator.seed:=S``, and compares:
                                        [--plan default] [-p NODE.PARAM:=VALUE ...]
 
 ``--reuse`` reads the runs already in DIR (``fixed_<seed>``, ``adaptive_<seed>``) instead of
-running them again. ``-p`` is passed to both runs of every seed (e.g. ``-p
-generator.adaptive_min_periods:=3``). Last line: JSON {seed: {...}, "summary": {...}}.
+running them again, and runs only the missing ones. ``-p`` is passed to both runs of every
+seed (e.g. ``-p generator.adaptive_min_periods:=3``). Last line: JSON {seed: {...},
+"summary": {...}}.
 """
 
 import argparse
@@ -110,7 +111,9 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--out", default="runs/bench_adaptive")
     parser.add_argument("--plan", default="default")
-    parser.add_argument("--reuse", action="store_true", help="read the runs already in --out")
+    parser.add_argument(
+        "--reuse", action="store_true", help="read the runs already in --out, run the missing"
+    )
     parser.add_argument("-p", dest="params", action="append", default=[], metavar="NODE.P:=V")
     args = parser.parse_args()
     out = Path(args.out)
@@ -120,7 +123,7 @@ def main() -> int:
         walls = {}
         for mode in ("fixed", "adaptive"):
             run_dir = out / f"{mode}_{seed}"
-            if not args.reuse:
+            if not (args.reuse and (run_dir / "models.json").exists()):
                 walls[mode] = round(run(run_dir, seed, mode == "adaptive", args.plan, args.params))
         result = compare(out / f"fixed_{seed}", out / f"adaptive_{seed}")
         result["wall_s"] = walls

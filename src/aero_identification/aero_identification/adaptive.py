@@ -12,7 +12,14 @@ estimates anyway; every threshold is a parameter (:class:`AdaptiveRules`).
   relative to |G|² and averaged over the excited lines, is below ``noise_db``. The robust BLA's
   noise variance of the mean over P periods falls as 1/P (Pintelon & Schoukens 2012, §4.3.1);
   once it is below the threshold a further period adds little that another realization would
-  not give too. Never below the valid periods of the level's earlier realizations: the
+  not give too. A split needs at least ``CLUSTER_PERIODS`` (3) periods to show (k-means on
+  fewer cannot tell one regime from two, clustering.py): with fewer, a realization whose
+  nonlinear distortion at the detection lines (noise taken out) is above ``distortion_db`` goes
+  on. Dynamic stall, whose cycle-to-cycle variation the clustering looks for, is a strong
+  nonlinearity; a level whose odd and even detection lines hold (almost) only noise has no
+  regime to split (odd random-phase multisines, Pintelon & Schoukens 2012, §4.3.2). The
+  default campaign's low level shows −32 to −40 dB there after 2 periods, its medium and high
+  levels −7 to −11 dB. Never below the valid periods of the level's earlier realizations: the
   estimators take the same P from each, so the earlier ones' extra periods would be lost; and
   for the same reason never beyond them: once it has as many it ends, and the level's rule
   below decides whether another realization is needed. Otherwise, while the realization's
@@ -41,7 +48,7 @@ import numpy as np
 
 from rig_runtime.params import Parameter
 
-from .bla import estimate_bla, frf_noise_variance
+from .bla import detection_lines, estimate_bla, frf_noise_variance
 from .data import PeriodicData
 
 # clustering.py (scikit-learn) is imported where it is used: the identifier node imports this
@@ -61,11 +68,15 @@ class AdaptiveRules:
     two realizations end near −13 dB there, the low level near −37 dB (docs/design.md §7.9).
     At −20 dB the high level would take every realization the budget allows and still not
     converge, so its default is −10 dB and the period clustering decides there.
+
+    distortion_db: the nonlinear distortion (dB of the output, `distortion_db`) beyond which
+    a realization of fewer than CLUSTER_PERIODS periods goes on.
     """
 
     noise_db: tuple[float, ...] = (-20.0,)
     total_db: tuple[float, ...] = (-20.0, -20.0, -10.0)
     min_cluster_periods: int = 8
+    distortion_db: float = -20.0
 
     @staticmethod
     def at(values: tuple[float, ...], rank: int, levels: int) -> float:
@@ -81,6 +92,7 @@ class AdaptiveRules:
             tuple(values["adaptive_noise_db"]),
             tuple(values["adaptive_total_db"]),
             int(values["adaptive_min_cluster_periods"]),
+            float(values["adaptive_distortion_db"]),
         )
 
 
@@ -112,7 +124,17 @@ PARAMETERS = [
         "adaptive: periods a level's dominant cluster must hold before it ends",
         min=1,
     ),
+    Parameter(
+        "adaptive_distortion_db",
+        _DEFAULT.distortion_db,
+        "adaptive: a realization of fewer than 3 periods (too few to show a split into "
+        "regimes) goes on while its nonlinear distortion at the detection lines, noise taken "
+        "out, is above this [dB of the output]",
+    ),
 ]
+
+# Periods k-means needs to tell one regime from two (dominant_periods, clustering.py).
+CLUSTER_PERIODS = 3
 
 
 @dataclass(frozen=True)
@@ -163,9 +185,30 @@ def noise_db(data: PeriodicData) -> float:
     return relative_variance_db(frf_noise_variance(G_mp), G_mp.mean(axis=(1, 2)))
 
 
+def distortion_db(data: PeriodicData) -> float:
+    """The nonlinear distortion of the realization so far (M = 1, P >= 2), in dB of its
+    output: the larger of the odd and even non-excited lines' mean power |Ȳ|²
+    (bla.detection_lines), less the noise variance of the mean over the periods (σ²/P,
+    averaged over the band), over the mean power at the excited lines. The paper's §3.3
+    distortion levels with the noise taken out (Pintelon & Schoukens 2012, §4.3.1-4.3.2);
+    -inf where the detection lines hold noise only."""
+    lines = data.excited_lines
+    max_line = int(lines.max())
+    odd, even = detection_lines(lines, max_line)
+    Y = data.Y[: max_line + 1, :, -1]  # (lines, P) of the newest realization
+    P = Y.shape[1]
+    Ybar = Y.mean(axis=1)
+    noise = float(np.mean(np.sum(np.abs(Y[1:] - Ybar[1:, None]) ** 2, axis=1) / (P * (P - 1))))
+    power = max(float(np.mean(np.abs(Ybar[k]) ** 2)) if k.size else 0.0 for k in (odd, even))
+    output = float(np.mean(np.abs(Ybar[lines]) ** 2))
+    if not (power > noise and output > 0.0):
+        return -math.inf
+    return 10.0 * math.log10((power - noise) / output)
+
+
 def dominant_periods(data: PeriodicData) -> tuple[int, np.ndarray]:
     """Periods in the dominant cluster, and the (P, M) mask of them (all when too few)."""
-    if data.P * data.M < 3:
+    if data.P * data.M < CLUSTER_PERIODS:
         return data.P * data.M, np.ones((data.P, data.M), dtype=bool)
     from .clustering import period_clusters
 
@@ -249,6 +292,16 @@ def judge_period(
                 f"its periods split into regimes (dominant cluster {clusters} of {current.P})",
                 figures,
             )
+        if current.P < CLUSTER_PERIODS:
+            figures["distortion_db"] = distortion_db(current)
+            if figures["distortion_db"] > rules.distortion_db:
+                return Verdict(
+                    "go_on",
+                    f"nonlinear distortion {figures['distortion_db']:.1f} dB of the output > "
+                    f"{rules.distortion_db:g} dB, and {current.P} periods are too few to "
+                    f"show a split into regimes (at least {CLUSTER_PERIODS})",
+                    figures,
+                )
         return Verdict(
             "end_realization",
             f"noise {figures['noise_db']:.1f} dB of |G|² < {noise_limit:g} dB after "

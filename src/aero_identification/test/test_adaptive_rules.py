@@ -22,11 +22,13 @@ def _records(
     seed: int = 0,
     gains: list[float] | None = None,
     shift: list[float] | None = None,
+    square: float = 0.0,
 ) -> PeriodicData:
     """(N, P, M) steady-state periods of G(s) = 1/(1 + s/10) driven by random-phase
     multisines: output noise of std ``noise``; realization m's gain ``gains[m]`` (stochastic
     nonlinear distortions: the realizations disagree); period p's output offset ``shift[p]``
-    (two regimes, as dynamic stall's, that leave the FRF alone)."""
+    (two regimes, as dynamic stall's, that leave the FRF alone); ``square``: a static
+    y + square·y² nonlinearity, whose distortion shows at the even detection lines."""
     rng = np.random.default_rng(seed)
     G = 1.0 / (1.0 + 1j * LINES / 10.0)
     u = np.zeros((N, P, M))
@@ -38,6 +40,7 @@ def _records(
         Y = np.zeros_like(U)
         Y[LINES] = G * U[LINES] * (gains[m] if gains else 1.0)
         one_y = np.fft.irfft(Y, N) * np.sqrt(N)
+        one_y = one_y + square * one_y**2
         for p in range(P):
             u[:, p, m] = one_u
             y[:, p, m] = one_y + noise * rng.standard_normal(N) + (shift[p] if shift else 0.0)
@@ -67,6 +70,23 @@ def test_a_converged_realization_ends_and_a_noisy_one_goes_on() -> None:
     verdict = _judge(noisy, None)
     assert verdict.action == "go_on" and "noise" in verdict.reason
     assert verdict.figures["noise_db"] >= -20
+
+
+def test_two_periods_of_a_strongly_nonlinear_realization_are_too_few_to_show_regimes() -> None:
+    # k-means cannot split 2 periods: where the detection lines show distortion (stall's
+    # nonlinearity), the realization goes on to CLUSTER_PERIODS; a linear one ends at 2.
+    linear = _judge(_records(2, 1, noise=0.001), None)
+    assert linear.action == "end_realization"
+    assert linear.figures["distortion_db"] < RULES.distortion_db
+    distorted = _records(2, 1, noise=0.001, square=0.3)
+    verdict = _judge(distorted, None)
+    assert verdict.action == "go_on" and "too few to show a split" in verdict.reason
+    assert verdict.figures["distortion_db"] > RULES.distortion_db
+    # With three periods the clustering judges, and one regime ends the realization.
+    assert _judge(_records(3, 1, noise=0.001, square=0.3), None).action == "end_realization"
+    # The threshold is the rules' parameter.
+    lenient = AdaptiveRules(noise_db=(-20.0,), total_db=(-20.0,), distortion_db=200.0)
+    assert _judge(distorted, None, rules=lenient).action == "end_realization"
 
 
 def test_never_below_the_floor_of_periods() -> None:

@@ -64,6 +64,7 @@ def test_the_node_declares_every_field_with_its_default_and_range() -> None:
         "adaptive_noise_db",
         "adaptive_total_db",
         "adaptive_min_cluster_periods",
+        "adaptive_distortion_db",
     }
     for f in FIELDS:
         p = declared[f.name]
