@@ -18,13 +18,14 @@ estimates anyway; every threshold is a parameter (:class:`AdaptiveRules`).
   on. Dynamic stall, whose cycle-to-cycle variation the clustering looks for, is a strong
   nonlinearity; a level whose odd and even detection lines hold (almost) only noise has no
   regime to split (odd random-phase multisines, Pintelon & Schoukens 2012, §4.3.2). The
-  default campaign's low level shows −32 to −40 dB there after 2 periods, its medium and high
-  levels −7 to −11 dB. Never below the valid periods of the level's earlier realizations: the
-  estimators take the same P from each, so the earlier ones' extra periods would be lost; and
-  for the same reason never beyond them: once it has as many it ends, and the level's rule
-  below decides whether another realization is needed. Otherwise, while the realization's
-  periods split into clusters (the cycle-to-cycle variation of dynamic stall, clustering.py),
-  it goes on.
+  default campaign's low level shows −32 to −39 dB there after 2 periods, its medium level −8
+  to −10 dB and its high level about −7 dB (where its noise is too large for an estimate, the
+  noise rule keeps it going anyway). Never below the valid periods of the level's earlier
+  realizations: the estimators take the same P from each, so the earlier ones' extra periods
+  would be lost; and for the same reason never beyond them: once it has as many it ends, and
+  the level's rule below decides whether another realization is needed. Otherwise, while the
+  realization's periods split into clusters (the cycle-to-cycle variation of dynamic stall,
+  clustering.py), it goes on.
 - **Realizations (finish the level, or add one)**, when a realization has ended:
   - BLA convergence: the total variance (noise and stochastic nonlinear distortions, over the
     realizations) relative to |G|² is below ``total_db`` (§4.3.1);
