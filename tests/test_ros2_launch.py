@@ -194,8 +194,14 @@ def test_rig_launch_starts_the_hardware_nodes_against_the_simulated_devices(
             text = audit.read_text() if audit.exists() else ""
             return text.count('"event": "apply"')
 
-        # Two seconds of the plan at 200 Hz applied by the controller: generator -> driver -> UDP.
-        assert wait_for(lambda: applied() >= 400, 60), "".join(lines)[-4000:]
+        # The scanner's stream has begun (its process starts slowly on a busy machine: numpy,
+        # the plant), then two more seconds of the plan at 200 Hz applied by the controller
+        # (generator -> driver -> UDP), so every stream has flowed for those two seconds.
+        assert wait_for(lambda: "first_frame_sent" in devices.log("sim_scanner"), 120), devices.log(
+            "sim_scanner"
+        )[-2000:]
+        start = applied()
+        assert wait_for(lambda: applied() >= start + 400, 60), "".join(lines)[-4000:]
         os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C, as a user stops the launch
         proc.wait(timeout=120)
         reader.join(timeout=10)

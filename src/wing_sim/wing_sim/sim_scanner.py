@@ -6,7 +6,9 @@ Run as a process::
         --alpha-amp-deg 2 --alpha-freq-hz 0.5 --frames 2000
 
 It sends to ``--host:--port`` (where the scanner driver listens) from an ephemeral port, which
-it prints as the first line on stdout. Frame k is acquired at t0 + k/rate (real-time pacing;
+it prints as the first line on stdout; once its first frame is sent it prints
+``{"first_frame_sent": counter}``, and when it ends its summary (JSON, the last line). Frame k
+is acquired at t0 + k/rate (real-time pacing;
 the stamp is that instant). Its pressures are the
 :class:`wing_sim.plant.WingPlant` response to the prescribed angle of attack
 
@@ -204,6 +206,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         send(swapped)
                         sent += 1
                         swapped = None
+            if k == 0:  # the stream has begun (a slow start delays it, see above)
+                print(json.dumps({"first_frame_sent": counter}), flush=True)
             k += 1
     finally:
         sock.close()
