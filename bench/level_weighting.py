@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import Any
 
 from aero_identification.campaign_dataset import campaign_dataset
-from aero_identification.data import PeriodicData
 from aero_identification.pipeline import identify, pnlss_sets
 from aero_identification.scan import periodic_error
 from aero_rig.offline import read_campaign_bag, recorded_config
@@ -49,9 +48,7 @@ def judge(bag: Path) -> dict[str, Any]:
         assert held is not None
         per_level = []
         for k in range(held.M):  # one held-out realization per level, the levels along M
-            one = PeriodicData(held.u[:, :, k : k + 1], held.y[:, :, k : k + 1], held.fs,
-                               held.excited_lines)  # fmt: skip
-            per_level.append(round(periodic_error(model, one)[0], 4))
+            per_level.append(round(periodic_error(model, held.select_realizations([k]))[0], 4))
         rows = result.to_json_dict()["errors"]["all_levels"]
         row = result.scan.best_row if result.scan is not None else None
         out[weighting] = {

@@ -97,6 +97,9 @@ class AdaptiveRules:
         )
 
 
+# Periods k-means needs to tell one regime from two (dominant_periods, clustering.py).
+CLUSTER_PERIODS = 3
+
 _DEFAULT = AdaptiveRules()
 PARAMETERS = [
     Parameter(
@@ -128,14 +131,11 @@ PARAMETERS = [
     Parameter(
         "adaptive_distortion_db",
         _DEFAULT.distortion_db,
-        "adaptive: a realization of fewer than 3 periods (too few to show a split into "
-        "regimes) goes on while its nonlinear distortion at the detection lines, noise taken "
-        "out, is above this [dB of the output]",
+        f"adaptive: a realization of fewer than {CLUSTER_PERIODS} periods (too few to show a "
+        "split into regimes) goes on while its nonlinear distortion at the detection lines, "
+        "noise taken out, is above this [dB of the output]",
     ),
 ]
-
-# Periods k-means needs to tell one regime from two (dominant_periods, clustering.py).
-CLUSTER_PERIODS = 3
 
 
 @dataclass(frozen=True)
@@ -196,10 +196,10 @@ def distortion_db(data: PeriodicData) -> float:
     lines = data.excited_lines
     max_line = int(lines.max())
     odd, even = detection_lines(lines, max_line)
-    Y = data.Y[: max_line + 1, :, -1]  # (lines, P) of the newest realization
-    P = Y.shape[1]
-    Ybar = Y.mean(axis=1)
-    noise = float(np.mean(np.sum(np.abs(Y[1:] - Ybar[1:, None]) ** 2, axis=1) / (P * (P - 1))))
+    Y = data.Y[: max_line + 1, :, -1:]  # (lines, P, 1) of the newest realization
+    Ybar = Y.mean(axis=1)[:, 0]
+    # σ²/P of the period mean: the robust BLA's noise variance, here of Y (M = 1).
+    noise = float(np.mean(frf_noise_variance(Y[1:])))
     power = max(float(np.mean(np.abs(Ybar[k]) ** 2)) if k.size else 0.0 for k in (odd, even))
     output = float(np.mean(np.abs(Ybar[lines]) ** 2))
     if not (power > noise and output > 0.0):
@@ -227,8 +227,7 @@ def bla_error(earlier: PeriodicData, newest: PeriodicData) -> tuple[float, float
     Ubar, Ybar = U.mean(axis=1)[:, 0], Y.mean(axis=1)[:, 0]
     scale = float(np.sqrt(np.sum(np.abs(Ybar) ** 2)))
     error = float(np.sqrt(np.sum(np.abs(Ybar - G * Ubar) ** 2))) / scale
-    P = Y.shape[1]
-    noise = np.sum(np.abs(Y[:, :, 0] - Ybar[:, None]) ** 2) / (P * (P - 1)) if P > 1 else 0.0
+    noise = float(np.sum(frf_noise_variance(Y))) if Y.shape[1] > 1 else 0.0  # σ²/P, summed
     return error, float(np.sqrt(noise)) / scale
 
 
