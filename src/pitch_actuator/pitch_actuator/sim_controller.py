@@ -193,7 +193,12 @@ class ControllerCore:
             and self.mode is not Mode.WATCHDOG
             and now_s - self._last_fresh_s > cfg.watchdog_timeout_s
         ):
-            self._enter(Mode.WATCHDOG, now_s, "no setpoint or heartbeat within the timeout")
+            gap = now_s - self._last_fresh_s
+            self._enter(
+                Mode.WATCHDOG,
+                now_s,
+                f"no setpoint or heartbeat for {gap:.3f} s (timeout {cfg.watchdog_timeout_s} s)",
+            )
         status = Status(0)
         if self.mode is Mode.FOLLOWING:
             command = self.target_rad
