@@ -80,6 +80,7 @@ def test_sim_launch_runs_a_short_campaign(colcon_install: Path, tmp_path: Path) 
     graph.write_text(yaml.safe_dump(sim))
     run_dir = tmp_path / "run"
     env = _sourced(colcon_install, graph_env())
+    env["TMPDIR"] = str(tmp_path)  # launch_ros leaves its launch_params_* files in TMPDIR
     proc = subprocess.Popen(
         [
             str(BIN / "ros2"),
@@ -132,6 +133,7 @@ def test_rig_launch_starts_the_hardware_nodes_against_the_simulated_devices(
     from rig_runtime.testing import Processes, wait_for
 
     env = _sourced(colcon_install, graph_env())
+    env["TMPDIR"] = str(tmp_path)  # launch_ros leaves its launch_params_* files in TMPDIR
     devices = Processes(env, log_dir=tmp_path)
     audit = tmp_path / "audit.jsonl"
     devices.start_python(

@@ -22,7 +22,7 @@ Score and selection rule (docs/design.md §7.6):
   realization would claim a precision its noise does not have, and a candidate would win
   only because its best LM iterate was chosen on the same data (a linear system otherwise
   "prefers" a cubic model by 3 %).
-- Cross-fit (``splits``; the pipeline's ``scan_splits``, default 2): the SE above measures
+- Cross-fit (``splits``; the pipeline's ``scan_splits``, default 1 = off): the SE above measures
   the noise on one held-out set, not how well a structure's extra terms are determined. So
   every candidate is also fitted with another realization held out (with one realization per
   level: another period), and its score is the mean of the K splits' errors with the K-fold
