@@ -80,6 +80,11 @@ def _dropped_periods_are_the_light_ones(seed: int) -> IdentificationResult:
     plain = result.no_clustering
     assert plain is not None and plain.levels["high"].periods_used == 8
     assert high.periods_used < 8
+    # Every kept period is used, P_m in realization m, not the fewest of every realization.
+    assert high.bla is not None
+    counts = tuple(int(c) for c in high.clusters.keep.sum(axis=0))
+    assert high.bla.periods_per_realization == counts
+    assert high.periods_used == sum(counts)
     return result
 
 
@@ -100,5 +105,6 @@ def test_every_final_report_carries_the_ablation(tmp_path: Path) -> None:
     assert no_clustering.startswith("| model | low 1 Hz |")
     assert no_clustering != (tmp_path / "table1_all_levels.md").read_text()
     assert (tmp_path / "table1_no_clustering.csv").exists()
-    assert "| high | 2 | [7, 1] | 6 / 8 |" in (tmp_path / "clustering.md").read_text()
+    # 3 + 4 kept periods, all used (the light one dropped)
+    assert "| high | 2 | [7, 1] | 7 / 8 |" in (tmp_path / "clustering.md").read_text()
     assert written["clusters_high"].stat().st_size > 0

@@ -39,7 +39,7 @@ class BLA:
         var_nl: (F,) max(var_total - var_noise, 0): variance of G due to the stochastic
             nonlinear distortions, of the mean.
         M: number of realizations used.
-        P: number of periods per realization used.
+        P: number of periods per realization used (the fewest, when `period_counts` differ).
         U_mean: (F, M) complex input spectrum at the excited lines, averaged over the periods of
             each realization (1/√N DFT scaling, see data.py).
         Y_mean: (F, M) complex output spectrum at the excited lines, same averaging.
@@ -56,6 +56,8 @@ class BLA:
             comparable with the three levels above (a line with only noise has an expected
             level equal to `noise_level`).
         method: "robust" or "lpm".
+        period_counts: periods used in each realization when they differ (`estimate_bla`'s
+            ``periods``); empty when every realization used `P`.
     """
 
     fs: float
@@ -81,6 +83,17 @@ class BLA:
     noise_freq: np.ndarray
     noise_level: np.ndarray
     method: str = "robust"
+    period_counts: tuple[int, ...] = ()
+
+    @property
+    def periods_per_realization(self) -> tuple[int, ...]:
+        """(M,) periods used in each realization."""
+        return self.period_counts or (self.P,) * self.M
+
+    @property
+    def periods_text(self) -> str:
+        """Periods per realization for reports: "6", or "2+5" when they differ."""
+        return "+".join(map(str, self.period_counts)) if self.period_counts else str(self.P)
 
     @property
     def snr(self) -> np.ndarray:
@@ -152,6 +165,7 @@ def estimate_bla(
     degree: int = 2,
     n_per_side: int | None = None,
     max_line: int | None = None,
+    periods: np.ndarray | None = None,
 ) -> BLA:
     """Estimate the BLA, its noise and nonlinear-distortion variances and the output levels.
 
@@ -176,13 +190,40 @@ def estimate_bla(
         degree, n_per_side: LPM polynomial degree and neighbours per side (see lpm.py).
         max_line: highest DFT line of the band for the odd/even/noise levels; default the
             highest excited line.
+        periods: (P, M) boolean mask of the periods to use (e.g. the dominant cluster's), at
+            least 2 in every realization; robust method only. Realizations may use different
+            numbers of periods P_m: G[m] is the mean over its P_m periods and its noise
+            variance Σ_p |G[m,p] − G[m]|² / (P_m(P_m−1)), so var_noise = (1/M²) Σ_m of those
+            (the formulas above with P per realization). With equal counts this is the
+            estimate of those periods alone (`PeriodicData.select`).
 
     Returns:
         BLA (variances of the mean estimate; see the BLA docstring for the M, P factors).
 
     Raises:
-        ValueError: for an unknown method, or "robust" with P < 2 or M < 2.
+        ValueError: for an unknown method, or "robust" with P < 2 or M < 2, or a ``periods``
+            mask of the wrong shape or with fewer than 2 periods in a realization.
     """
+    if periods is not None:
+        periods = np.asarray(periods)
+        if periods.shape != (data.P, data.M) or periods.dtype != bool:
+            raise ValueError(
+                f"periods must be a boolean (P, M)={(data.P, data.M)} mask; got dtype "
+                f"{periods.dtype} and shape {periods.shape}"
+            )
+        counts = periods.sum(axis=0)
+        if counts.min() < 2 or method == "lpm":
+            raise ValueError(
+                "a periods mask needs the robust method and at least 2 periods in every "
+                f"realization (periods per realization: {counts.tolist()})"
+            )
+        if np.all(counts == counts[0]):  # equal counts: those periods alone, as select() takes
+            cols = np.stack([np.flatnonzero(periods[:, m]) for m in range(data.M)], axis=1)
+            idx_m = np.arange(data.M)[None, :]
+            equal = PeriodicData(
+                data.u[:, cols, idx_m], data.y[:, cols, idx_m], data.fs, data.excited_lines
+            )
+            return estimate_bla(equal, "robust", degree, n_per_side, max_line)
     N, P, M = data.N, data.P, data.M
     lines = data.excited_lines
     if max_line is None:
@@ -207,16 +248,36 @@ def estimate_bla(
             )
         U = data.U[lines]  # (F, P, M)
         Y = data.Y[lines]
-        _check_input_power(np.abs(U).min(axis=1), lines)
-        G_mp = Y / U
-        G_m = G_mp.mean(axis=1)  # (F, M)
-        var_noise = frf_noise_variance(G_mp)
-        U_mean = U.mean(axis=1)
-        Y_mean = Y.mean(axis=1)
-        # Levels of the period-averaged output spectrum over the band (Fig. 6 of the paper).
         Y_band = data.Y[band]  # (K, P, M)
-        Y_band_mean = Y_band.mean(axis=1)
-        var_Y_band_mean = np.var(Y_band, axis=1, ddof=1).mean(axis=1) / P
+        if periods is None:
+            _check_input_power(np.abs(U).min(axis=1), lines)
+            G_mp = Y / U
+            G_m = G_mp.mean(axis=1)  # (F, M)
+            var_noise = frf_noise_variance(G_mp)
+            U_mean = U.mean(axis=1)
+            Y_mean = Y.mean(axis=1)
+            # Levels of the period-averaged output spectrum over the band (Fig. 6 of the paper).
+            Y_band_mean = Y_band.mean(axis=1)
+            var_Y_band_mean = np.var(Y_band, axis=1, ddof=1).mean(axis=1) / P
+        else:  # P_m periods in realization m (docstring)
+            U_mean = np.empty((lines.size, M), dtype=complex)
+            Y_mean = np.empty_like(U_mean)
+            G_m = np.empty_like(U_mean)
+            var_noise = np.zeros(lines.size)
+            Y_band_mean = np.empty((band.size, M), dtype=complex)
+            var_Y_band_mean = np.zeros(band.size)
+            for m in range(M):
+                use = np.flatnonzero(periods[:, m])
+                U_m, Y_m = U[:, use, m], Y[:, use, m]
+                _check_input_power(np.abs(U_m).min(axis=1), lines)
+                G_mp = Y_m / U_m
+                G_m[:, m] = G_mp.mean(axis=1)
+                var_noise += frf_noise_variance(G_mp[:, :, None])  # of G[m]
+                U_mean[:, m], Y_mean[:, m] = U_m.mean(axis=1), Y_m.mean(axis=1)
+                Y_band_mean[:, m] = Y_band[:, use, m].mean(axis=1)
+                var_Y_band_mean += np.var(Y_band[:, use, m], axis=1, ddof=1) / use.size / M
+            var_noise /= M**2
+            P = int(periods.sum(axis=0).min())
         noise_lines = band
     else:
         if P >= 2:
@@ -275,6 +336,7 @@ def estimate_bla(
         noise_freq=noise_lines * f0,
         noise_level=np.sqrt(var_Y_band_mean),
         method=method,
+        period_counts=() if periods is None else tuple(int(c) for c in periods.sum(axis=0)),
     )
 
 

@@ -156,11 +156,13 @@ class PeriodicData:
     def select(self, keep: np.ndarray, min_periods: int = 2) -> "PeriodicData":
         """Keep only the periods marked in `keep` (e.g. the dominant cluster).
 
-        The nonparametric methods need the same number of periods in every realization, so:
+        The (N, P, M) layout holds the same number of periods in every realization, so:
         realizations with fewer than `min_periods` kept periods are dropped, and the others are
         truncated to the smallest kept count, retaining the LATEST kept periods of each (they are
         the furthest from any start-up transient). Kept periods need not be consecutive: in
-        periodic steady state every period is a valid period.
+        periodic steady state every period is a valid period. To use every kept period of
+        realizations that keep different counts, pass the mask to `bla.estimate_bla(periods=)`
+        instead (what the pipeline does).
 
         Args:
             keep: (P, M) boolean mask, True = keep (what `cluster_periods` returns).

@@ -225,6 +225,7 @@ def _level_models(
     assert data is not None
     t0 = time.perf_counter()
     kept = data
+    periods = None  # (P, M) mask of kept's periods where realizations keep different counts
     if config.clustering and data.P * data.M >= 3:
         res.clusters = period_clusters(data)
         kept = data.select(res.clusters.keep, min_periods=config.min_periods)
@@ -234,8 +235,14 @@ def _level_models(
                 "BLA from all valid periods"
             )
             kept = data
-    res.periods_used = kept.P * kept.M
-    res.bla = estimate_bla(kept, method="auto")  # robust with M >= 2, else LPM
+        elif kept.M >= 2 and kept.P >= 2:
+            # The robust BLA takes every kept period of the retained realizations, P_m each
+            # (bla.estimate_bla's periods), not the fewest of every realization.
+            retained = np.flatnonzero(np.isin(data.realization_index, kept.realization_index))
+            kept = data.select_realizations(retained)
+            periods = res.clusters.keep[:, retained]
+    res.periods_used = kept.P * kept.M if periods is None else int(periods.sum())
+    res.bla = estimate_bla(kept, method="auto", periods=periods)  # robust with M >= 2, else LPM
     if kept.M < 2:
         warnings.append(
             f"level {lv.name}: one realization (M = 1): the nonlinear distortion level cannot "
@@ -247,11 +254,15 @@ def _level_models(
     if order == 0:
         order = fit_linear_ss(res.bla, max_order=config.max_order, refine_fit=False).order
         res.order_scanned = True
+    u_kept, y_kept = (
+        (kept.u, kept.y) if periods is None else (kept.u[:, periods], kept.y[:, periods])
+    )
     res.linear = fit_linear_ss(res.bla, nx=order).with_operating_point(
-        float(np.mean(kept.u)), float(np.mean(kept.y))
+        float(np.mean(u_kept)), float(np.mean(y_kept))
     )
     say(
-        f"level {lv.name}: BLA ({res.bla.method}, M={kept.M}, P={kept.P}), linear order "
+        f"level {lv.name}: BLA ({res.bla.method}, M={kept.M}, P={res.bla.periods_text}), "
+        f"linear order "
         f"{res.linear.order}{' (scan)' if res.order_scanned else ''}, "
         f"{time.perf_counter() - t0:.1f} s"
     )

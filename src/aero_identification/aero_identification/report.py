@@ -64,7 +64,7 @@ def plot_frf(bla: BLA, path: str | Path, title: str = "Best linear approximation
     )
     ax_mag.plot(bla.freq, _db_variance(bla.var_nl), ".", color="tab:red", ms=3, label="nonlinear σ")
     ax_mag.set_ylabel("magnitude [dB]")
-    ax_mag.set_title(f"{title} (M={bla.M}, P={bla.P}, {bla.method})")
+    ax_mag.set_title(f"{title} (M={bla.M}, P={bla.periods_text}, {bla.method})")
     ax_mag.legend(loc="best", fontsize="small")
     ax_mag.grid(True, alpha=0.3)
     ax_phase.plot(bla.freq, np.degrees(np.unwrap(np.angle(bla.G))), "k-")
@@ -374,7 +374,8 @@ def summary_markdown(result: IdentificationResult) -> str:
                 order = f"{lv.linear.order}" + (" (scan)" if lv.order_scanned else "")
                 modes = ", ".join(f"{f:.2f}" for f in modal_frequencies(lv.linear)) or "–"
             row += [
-                lv.bla.method, f"{lv.bla.M} × {lv.bla.P}", str(lv.periods_used), clusters,
+                lv.bla.method, f"{lv.bla.M} × {lv.bla.periods_text}", str(lv.periods_used),
+                clusters,
                 f"{s['G_db']:.1f}", f"{s['noise_db']:.1f}", f"{s['snr_db']:.1f}", nl, order,
                 modes,
             ]  # fmt: skip

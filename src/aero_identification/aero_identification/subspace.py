@@ -256,7 +256,7 @@ def variance_dof(bla: BLA, which: str) -> int | None:
     if which == "total" and bla.method == "robust" and bla.M >= 2:
         return 2 * (bla.M - 1)
     if which == "noise" and bla.method == "robust" and bla.P >= 2:
-        return 2 * bla.M * (bla.P - 1)
+        return 2 * sum(p - 1 for p in bla.periods_per_realization)
     return None
 
 

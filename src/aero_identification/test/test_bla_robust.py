@@ -119,3 +119,58 @@ def test_line_without_input_power_is_refused() -> None:
         estimate_bla(wrong)
     with pytest.raises(ValueError, match=r"no power at excited line\(s\) \[7\]"):
         estimate_bla(wrong, method="lpm")
+
+
+def test_realizations_with_different_period_counts_use_all_their_periods() -> None:
+    """A periods mask with P_m periods in realization m (e.g. a dominant cluster that holds 2
+    periods of one realization and 4 of another): G[m] and its noise variance come from all of
+    realization m's P_m periods (Pintelon & Schoukens 2012 §4.3.1 with P per realization)."""
+    rng = np.random.default_rng(5)
+    lines = odd_lines_random_skip(rng, 25)
+    sigma = 0.02
+    data = simulate(rng, lines, lambda x: x, sigma)
+    mask = np.ones((P, M), dtype=bool)
+    mask[:2, ::2] = False  # even realizations keep their last 2 periods, odd ones all 4
+    bla = estimate_bla(data, periods=mask)
+    counts = mask.sum(axis=0)
+    assert bla.period_counts == tuple(counts.tolist()) and bla.P == 2
+    assert bla.periods_text == "+".join(map(str, counts))
+    np.testing.assert_allclose(bla.U_mean[:, 0], data.U[lines][:, 2:, 0].mean(axis=1))
+    np.testing.assert_allclose(bla.U_mean[:, 1], data.U[lines][:, :, 1].mean(axis=1))
+    # Noise variance of the mean G: realization m contributes σ²/(P_m |U_m|²), over M².
+    var_true = np.sum(sigma**2 / (counts * np.abs(bla.U_mean) ** 2), axis=1) / M**2
+    assert np.mean(bla.var_noise) / np.mean(var_true) == pytest.approx(1.0, abs=0.2)
+    # Truncating every realization to 2 periods (the equal-count estimate) is noisier: in
+    # expectation by Σ 1/2 against Σ 1/P_m over the realizations, 4/3 here.
+    truncated = estimate_bla(data.select(mask))
+    assert truncated.P == 2 and truncated.period_counts == ()
+    assert 1.1 < np.mean(truncated.var_noise) / np.mean(bla.var_noise) < 1.6
+    _, G_true = freqz(B, A, worN=2 * np.pi * lines / N)
+    assert np.mean(np.abs(bla.G - G_true) / np.sqrt(bla.var_noise) < 3) >= 0.95
+
+
+def test_a_mask_with_equal_counts_is_the_estimate_of_those_periods() -> None:
+    rng = np.random.default_rng(6)
+    lines = odd_lines_random_skip(rng, 25)
+    data = simulate(rng, lines, lambda x: x + 0.3 * x**3, 0.02)
+    mask = np.zeros((P, M), dtype=bool)
+    mask[1:, :] = True
+    mask[0, 3], mask[1, 3] = True, False  # not the same positions in every realization
+    bla, alone = estimate_bla(data, periods=mask), estimate_bla(data.select(mask))
+    for name in ("G", "var_noise", "var_total", "U_mean", "noise_level", "odd_nl_level"):
+        np.testing.assert_array_equal(getattr(bla, name), getattr(alone, name))
+    assert bla.period_counts == () and bla.P == 3
+
+
+def test_a_periods_mask_is_checked() -> None:
+    rng = np.random.default_rng(7)
+    lines = odd_lines_random_skip(rng, 10)
+    data = simulate(rng, lines, lambda x: x, 0.02)
+    one = np.ones((P, M), dtype=bool)
+    one[1:, 0] = False  # realization 0 keeps one period: no noise estimate
+    with pytest.raises(ValueError, match=r"at least 2 periods in every realization"):
+        estimate_bla(data, periods=one)
+    with pytest.raises(ValueError, match=r"boolean \(P, M\)"):
+        estimate_bla(data, periods=np.ones((P, M + 1), dtype=bool))
+    with pytest.raises(ValueError, match=r"robust method"):
+        estimate_bla(data, method="lpm", periods=np.ones((P, M), dtype=bool))
