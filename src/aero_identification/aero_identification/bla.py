@@ -217,13 +217,8 @@ def estimate_bla(
                 "a periods mask needs the robust method and at least 2 periods in every "
                 f"realization (periods per realization: {counts.tolist()})"
             )
-        if np.all(counts == counts[0]):  # equal counts: those periods alone, as select() takes
-            cols = np.stack([np.flatnonzero(periods[:, m]) for m in range(data.M)], axis=1)
-            idx_m = np.arange(data.M)[None, :]
-            equal = PeriodicData(
-                data.u[:, cols, idx_m], data.y[:, cols, idx_m], data.fs, data.excited_lines
-            )
-            return estimate_bla(equal, "robust", degree, n_per_side, max_line)
+        if np.all(counts == counts[0]):  # equal counts: the estimate of those periods alone
+            return estimate_bla(data.select(periods), "robust", degree, n_per_side, max_line)
     N, P, M = data.N, data.P, data.M
     lines = data.excited_lines
     if max_line is None:
