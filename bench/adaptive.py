@@ -13,6 +13,13 @@ sim_actuator.seed:=S``, and compares:
 
     .venv/bin/python bench/adaptive.py [--seeds 0 1 2] [--out DIR] [--reuse]
                                        [--plan default] [-p NODE.PARAM:=VALUE ...]
+                                       [--bootstrap B]
+
+``--bootstrap B`` refits every run's bag with ``aero-rig fit BAG --bootstrap B`` (into
+``<run>/fit_bootstrap``; reused with ``--reuse``) and compares those tables: each cell's spread
+is then sqrt(s² + b²), s the std over the sine's periods and b the std over B bootstrap refits
+on the estimation periods (docs/design.md §7.7), so that "within its spread" includes the
+models' estimation scatter.
 
 ``--reuse`` reads the runs already in DIR (``fixed_<seed>``, ``adaptive_<seed>``) instead of
 running them again, and runs only the missing ones. ``-p`` is passed to both runs of every
@@ -51,18 +58,41 @@ def run(out: Path, seed: int, adaptive: bool, plan: str, extra: list[str]) -> fl
     return time.monotonic() - t0
 
 
+BOOTSTRAP_DIR = "fit_bootstrap"  # <run>/fit_bootstrap: the bag refitted with --bootstrap
+
+
+def refit(run_dir: Path, replicates: int, reuse: bool) -> float:
+    """``aero-rig fit <run>/bag --bootstrap B`` into <run>/fit_bootstrap; its wall time [s]
+    (0 when reused)."""
+    out = run_dir / BOOTSTRAP_DIR
+    if reuse and (out / "table1_all_levels.csv").exists():
+        return 0.0
+    args = [sys.executable, "-m", "aero_rig.cli", "fit", str(run_dir / "bag"), "--out", str(out)]
+    t0 = time.monotonic()
+    proc = subprocess.run([*args, "--bootstrap", str(replicates)], capture_output=True, text=True)
+    (run_dir / f"{BOOTSTRAP_DIR}.out").write_text(proc.stdout + proc.stderr)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{run_dir.name}: fit exit {proc.returncode}\n{proc.stderr[-2000:]}")
+    return time.monotonic() - t0
+
+
 def table1(run_dir: Path) -> dict[tuple[str, str], tuple[float, float]]:
-    """{(model, column): (error, spread)} of table1_all_levels.csv."""
-    with (run_dir / "table1_all_levels.csv").open() as f:
+    """{(model, column): (error, spread)} of table1_all_levels.csv: the bootstrap refit's
+    (<run>/fit_bootstrap) when there is one, its spread sqrt(std² + estimation std²)."""
+    source = run_dir / BOOTSTRAP_DIR if (run_dir / BOOTSTRAP_DIR).is_dir() else run_dir
+    with (source / "table1_all_levels.csv").open() as f:
         rows = list(csv.reader(f))
     header = rows[0]
+    index = {name: i for i, name in enumerate(header)}
     cells = {}
     for row in rows[1:]:
         for i, name in enumerate(header):
             if i == 0 or name.endswith(" std"):
                 continue
             value = float(row[i]) if row[i] else math.nan
-            spread = float(row[i + 1]) if row[i + 1] else math.nan
+            parts = [row[j] for j in (index.get(f"{name} std"), index.get(f"{name} estimation std"))
+                     if j is not None]  # fmt: skip
+            spread = math.sqrt(sum(float(p) ** 2 for p in parts)) if all(parts) else math.nan
             cells[(row[0], name)] = (value, spread)
     return cells
 
@@ -115,6 +145,10 @@ def main() -> int:
         "--reuse", action="store_true", help="read the runs already in --out, run the missing"
     )
     parser.add_argument("-p", dest="params", action="append", default=[], metavar="NODE.P:=V")
+    parser.add_argument(
+        "--bootstrap", type=int, default=0, metavar="B",
+        help="refit each bag with `aero-rig fit --bootstrap B` and compare with its spreads",
+    )  # fmt: skip
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -125,6 +159,8 @@ def main() -> int:
             run_dir = out / f"{mode}_{seed}"
             if not (args.reuse and (run_dir / "models.json").exists()):
                 walls[mode] = round(run(run_dir, seed, mode == "adaptive", args.plan, args.params))
+            if args.bootstrap > 0:
+                walls[f"{mode}_fit"] = round(refit(run_dir, args.bootstrap, args.reuse))
         result = compare(out / f"fixed_{seed}", out / f"adaptive_{seed}")
         result["wall_s"] = walls
         results[str(seed)] = result

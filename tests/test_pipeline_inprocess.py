@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import math
 from typing import Any
 
 import numpy as np
@@ -344,3 +345,37 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     assert written["pnlss_scan_plot"].stat().st_size > 10_000
     payload = json.loads((tmp_path / "models.json").read_text())
     assert sum(row["selected"] for row in payload["pnlss_scan"]["table"]) == 1
+
+
+def test_final_identification_with_the_estimation_bootstrap(campaign, tmp_path) -> None:
+    """config.bootstrap: each Table 1 cell gets the std over refits on bootstrap replicates of
+    the estimation periods, in the result, both tables and models.json; the estimate itself is
+    the one without the bootstrap."""
+    from aero_identification.report import write_report
+
+    asm = _assemble(campaign)
+    config = IdentificationConfig(
+        bootstrap=3, clustering_ablation=False, scan_nx=(1,), scan_degrees=((2,),),
+        scan_max_iter=10, scan_workers=1,
+    )  # fmt: skip
+    result = identify(asm, config, final=True)
+    boot = result.bootstrap
+    assert result.scan is not None  # the replicates refit the scan's kept structure
+    assert boot is not None and boot.replicates == 3 and boot.seconds > 0
+    assert set(boot.spreads_all) == set(result.errors_all)
+    assert set(boot.spreads_level1) == set(result.errors_level1)
+    # The refits differ from the estimate and from each other: every spread is positive.
+    assert all(math.isfinite(s) and s > 0 for s in boot.spreads_all.values())
+    for (model, level, f), n in boot.failed_all.items():  # a failed refit is named
+        assert (n == 0) == (f"{model} at {level} {f:g} Hz" not in " ".join(result.warnings))
+    plain = identify(asm, dataclasses.replace(config, bootstrap=0), final=True)
+    assert plain.bootstrap is None and plain.errors_all == result.errors_all
+    write_report(result, tmp_path)
+    md = (tmp_path / "table1_all_levels.md").read_text()
+    assert "std over 3 bootstrap refits" in md and md.count("±") == 2 + 2 * 3 * 4  # note, cells
+    header = (tmp_path / "table1_all_levels.csv").read_text().splitlines()[0]
+    assert header.count("estimation std") == 4
+    errors = json.loads((tmp_path / "models.json").read_text())["errors"]
+    assert errors["bootstrap_replicates"] == 3
+    rows = {(m, lv, f): s for m, lv, f, s in errors["all_levels_bootstrap_std"]}
+    assert rows[("PNLSS", "high", 1.6)] == boot.spreads_all[("PNLSS", "high", 1.6)]

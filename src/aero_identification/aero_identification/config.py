@@ -164,6 +164,14 @@ class IdentificationConfig:
     scan_splits: int = hyper(
         1, "scan: cross-fit splits per candidate (1 = one held-out realization)", min=1
     )
+    # Table 1's estimation spread (issues 22, 23; bootstrap.py, docs/design.md §7.7): the final
+    # identification refits the level models and the kept PNLSS structure on this many
+    # replicates of the estimation periods, drawn with replacement within each realization, and
+    # adds each cell's std over them. 0: off. Each replicate costs about one PNLSS fit of the
+    # kept structure and one of level 1 (default campaign: about 10 s on 2 cores).
+    bootstrap: int = hyper(
+        0, "Table 1: bootstrap replicates over the estimation periods (0 = off)", min=0
+    )
 
     def __post_init__(self) -> None:
         for spec in _SPECS:

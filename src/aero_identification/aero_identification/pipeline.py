@@ -19,7 +19,9 @@ Every stage runs that the data allow:
    FRF and BLA SS centred on the record's measured means, PNLSS absolute; each cell's ± is the
    std over the sine's periods of the per-period error, `metrics.relative_rms_error_spread`)
    and on held-out levels
-   (``held_out``: never used by any fit, so their errors are test errors);
+   (``held_out``: never used by any fit, so their errors are test errors); with
+   ``config.bootstrap`` (final only) each cell's estimation spread, the std over refits on
+   bootstrap replicates of the estimation periods (bootstrap.py, `_estimation_bootstrap`);
 5. with ``config.clustering_ablation`` (final only), the same pipeline without clustering, and
    what clustering changed (`clustering_effect`).
 
@@ -36,7 +38,8 @@ from typing import Any
 import numpy as np
 
 from .bla import bla_levels_db, estimate_bla
-from .clustering import period_clusters
+from .bootstrap import Cell, replicate_spreads, resample_periods
+from .clustering import ClusterResult, period_clusters
 from .config import IdentificationConfig
 from .data import PeriodicData, random_phase_period
 from .dataset import Dataset, LevelRecord, SineData
@@ -49,14 +52,17 @@ from .metrics import (
 from .models import LinearStateSpace, PNLSSModel
 from .monomials import structure_exponents
 from .pnlss import fit_pnlss, one_blas_thread, output_equation_start
-from .results import IdentificationResult, LevelResult
-from .scan import ScanResult, scan_pnlss
+from .results import EstimationSpread, IdentificationResult, LevelResult
+from .scan import Candidate, ScanResult, fit_candidate, scan_pnlss
 from .subspace import fit_linear_ss
 
 # Largest Levenberg–Marquardt Jacobian a PNLSS fit may hold (bytes): one (samples × parameters)
 # float64 buffer, each iteration about samples × parameters² flops: beyond 1 GB a fit takes hours
 # on the 2-core target machine (full degrees 2–5 at nx = 6 on the four F-16 levels: 1.45 GB).
 MAX_JACOBIAN_BYTES = 1_000_000_000
+
+# The estimation bootstrap's random draws (bootstrap.py): fixed, so that a fit is reproducible.
+BOOTSTRAP_SEED = 20_221_125
 
 Log = Callable[[str], None]
 
@@ -133,6 +139,8 @@ def _identify(
         result.warnings = [w for w in models_from.warnings if not w.startswith("sine ")]
         result.timings_s = {"bla": 0.0, "pnlss": 0.0}
         _validate(dataset, result)
+        if final and config.bootstrap > 0:
+            _estimation_bootstrap(dataset, result, config, say)
         if result.no_clustering is not None:
             result.no_clustering = identify(
                 dataset, result.no_clustering.config, final, models_from=result.no_clustering,
@@ -190,13 +198,17 @@ def _identify(
             result.level1_signature = signature
     result.timings_s["pnlss"] = time.perf_counter() - t0
 
-    # 4. Validation: single sines, held-out levels.
+    # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
     _validate(dataset, result)
+    if final and config.bootstrap > 0:
+        _estimation_bootstrap(dataset, result, config, say)
 
     # 5. The ablation: the same pipeline on every valid period (final identification only).
     if final and config.clustering and config.clustering_ablation:
         t0 = time.perf_counter()
-        plain = dataclasses.replace(config, clustering=False, clustering_ablation=False)
+        plain = dataclasses.replace(
+            config, clustering=False, clustering_ablation=False, bootstrap=0
+        )
         if any(lv.clusters is not None and lv.clusters.k > 1 for lv in result.levels.values()):
             result.no_clustering = identify(
                 dataset, plain, final=True, client=client, held_out=held_out, log=say
@@ -218,16 +230,24 @@ def _finish(dataset: Dataset, result: IdentificationResult, t_start: float) -> N
 
 
 def _level_models(
-    lv: LevelRecord, res: LevelResult, config: IdentificationConfig, warnings: list[str], say: Log
+    lv: LevelRecord,
+    res: LevelResult,
+    config: IdentificationConfig,
+    warnings: list[str],
+    say: Log,
+    clusters: ClusterResult | None = None,
+    order: int | None = None,
 ) -> None:
-    """Clustering, BLA and (estimation levels) the linear model of one level."""
+    """Clustering, BLA and (estimation levels) the linear model of one level. ``clusters``,
+    ``order``: take these periods and this linear order instead of choosing them (the
+    estimation bootstrap's replicates of an estimate)."""
     data = lv.data
     assert data is not None
     t0 = time.perf_counter()
     kept = data
     periods = None  # (P, M) mask of kept's periods where realizations keep different counts
     if config.clustering and data.P * data.M >= 3:
-        res.clusters = period_clusters(data)
+        res.clusters = clusters if clusters is not None else period_clusters(data)
         kept = data.select(res.clusters.keep, min_periods=config.min_periods)
         if kept.M < min(2, data.M):
             warnings.append(
@@ -250,7 +270,7 @@ def _level_models(
         )
     if res.role != "estimation":
         return  # its BLA is for the report only; no model is fitted to held-out data
-    order = config.nx
+    order = config.nx if order is None else order
     if order == 0:
         order = fit_linear_ss(res.bla, max_order=config.max_order, refine_fit=False).order
         res.order_scanned = True
@@ -664,6 +684,127 @@ def _held_out_errors(result: IdentificationResult) -> list[dict[str, Any]]:
             }
         )
     return rows
+
+
+# --- Table 1's estimation spread -----------------------------------------------------------------
+
+
+def _refit_candidates(
+    result: IdentificationResult, config: IdentificationConfig
+) -> tuple[tuple[Candidate, int, float | None] | None, tuple[Candidate, int, float | None] | None]:
+    """The structures (candidate, LM iterations, stress scale) the estimate's all-levels and
+    level-1 PNLSS were fitted with: the scan's kept candidate, or `_fit`'s single structure."""
+    lin = result.linear_level1
+    if lin is None:
+        return None, None
+    single = (
+        Candidate(lin.nx, tuple(config.degrees), "state+output", config.structure, "output_ls"),
+        config.max_iter,
+        None,
+    )
+    every: tuple[Candidate, int, float | None] | None = None
+    if result.scan is not None and result.pnlss_all is not None:
+        row = result.scan.best_row
+        cand = Candidate(row.nx, tuple(row.degrees), row.equations, row.structure, row.start)
+        every = (cand, config.scan_max_iter, config.scan_stress or None)
+    elif result.pnlss_all is not None:
+        every = single
+    return every, (single if result.pnlss_level1 is not None else None)
+
+
+def _refit_pnlss(
+    levels: Sequence[LevelResult],
+    how: tuple[Candidate, int, float | None],
+    config: IdentificationConfig,
+) -> PNLSSModel | None:
+    """One PNLSS fit of a given structure on `pnlss_sets(levels)`, from the lowest level's
+    linear model (at the candidate's order, as the scan starts it); None when it fails or
+    diverges on the held-out periods (the scan would not have kept it)."""
+    cand, max_iter, stress = how
+    data, validation, _ = pnlss_sets(levels, config)
+    low = levels[0]
+    assert low.linear is not None and low.bla is not None
+    lin = low.linear
+    if cand.nx != lin.nx:
+        u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
+        lin = fit_linear_ss(low.bla, nx=cand.nx).with_operating_point(u0, y0)
+    if validation is None:
+        return None
+    options = {
+        "max_iter": max_iter,
+        "record_weights": _level_weights(data, config.level_weighting),
+        "validation_weights": _level_weights(validation, config.level_weighting),
+        "stress": stress,
+    }
+    row, model = fit_candidate(cand, lin, data, validation, options)
+    return model if row.status == "ok" else None
+
+
+def _estimation_bootstrap(
+    dataset: Dataset, result: IdentificationResult, config: IdentificationConfig, say: Log
+) -> None:
+    """Table 1's estimation spread (bootstrap.py): ``config.bootstrap`` replicates, each with
+    every estimation level's kept periods drawn with replacement within each realization, the
+    level's BLA and linear model refitted at the estimate's order on the estimate's clusters,
+    the all-levels and level-1 PNLSS refitted with the estimate's structures, and Table 1
+    scored; each cell's spread is the std over the replicates (fixed seed: reproducible)."""
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    every, level1 = _refit_candidates(result, config)
+    quiet: Log = lambda _m: None  # noqa: E731
+    replicates_all: list[dict[Cell, float]] = []
+    replicates_level1: list[dict[Cell, float]] = []
+    for _ in range(config.bootstrap):
+        rep = IdentificationResult(config=config, fs=result.fs, sines_planned=result.sines_planned)
+        for name, res in result.levels.items():
+            data = res.record.data
+            if res.role != "estimation" or data is None or res.linear is None:
+                rep.levels[name] = res
+                continue
+            keep = None if res.clusters is None else res.clusters.keep
+            record = dataclasses.replace(res.record, data=resample_periods(data, keep, rng))
+            res_b = LevelResult(record, res.role)
+            rep.levels[name] = res_b
+            try:
+                _level_models(
+                    record, res_b, config, [], quiet, clusters=res.clusters, order=res.linear.order
+                )
+            except (ValueError, np.linalg.LinAlgError):
+                res_b.linear = None  # this replicate has no model of the level: its cells fail
+        estimation = [r for r in rep.levels.values() if r.role == "estimation"]
+        ready = [r for r in estimation if r.bla is not None and r.linear is not None]
+        rep.linear_level1 = estimation[0].linear if estimation else None
+        if every is not None and ready and ready[0] is estimation[0]:
+            rep.pnlss_all = _refit_pnlss(ready, every, config)
+        if level1 is not None and ready and ready[0] is estimation[0]:
+            same = result.pnlss_level1 is result.pnlss_all and every == level1
+            rep.pnlss_level1 = rep.pnlss_all if same else _refit_pnlss(ready[:1], level1, config)
+        _validate(dataset, rep)
+        replicates_all.append(dict(rep.errors_all))
+        replicates_level1.append(dict(rep.errors_level1))
+    spreads_all, failed_all = replicate_spreads(replicates_all, list(result.errors_all))
+    spreads_level1, failed_level1 = replicate_spreads(replicates_level1, list(result.errors_level1))
+    result.bootstrap = EstimationSpread(
+        replicates=config.bootstrap,
+        spreads_all=spreads_all,
+        spreads_level1=spreads_level1,
+        failed_all=failed_all,
+        failed_level1=failed_level1,
+        seconds=time.perf_counter() - t0,
+    )
+    for table, failed in (("all levels", failed_all), ("level 1", failed_level1)):
+        for (model, level, f), n in failed.items():
+            if n:
+                result.warnings.append(
+                    f"bootstrap ({table}): {model} at {level} {f:g} Hz: the refit failed, "
+                    f"diverged or was rejected by the scan's checks in {n} of "
+                    f"{config.bootstrap} replicates (its estimation spread is over the rest)"
+                )
+    result.timings_s["bootstrap"] = result.bootstrap.seconds
+    say(
+        f"Table 1 estimation bootstrap: {config.bootstrap} replicates, "
+        f"{result.bootstrap.seconds:.1f} s"
+    )
 
 
 # --- the ablation -------------------------------------------------------------------------------

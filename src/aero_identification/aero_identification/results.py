@@ -45,6 +45,28 @@ class LevelResult:
 
 
 @dataclass
+class EstimationSpread:
+    """Table 1's estimation spread (bootstrap.py, ``config.bootstrap``): per cell, the std of
+    the error over refits on bootstrap replicates of the estimation periods, and how many
+    replicates failed or diverged there."""
+
+    replicates: int
+    spreads_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    spreads_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    failed_all: dict[tuple[str, str, float], int] = field(default_factory=dict)
+    failed_level1: dict[tuple[str, str, float], int] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def note(self) -> str:
+        """What the Markdown tables' second ± is (a line above each table)."""
+        return (
+            f"Each cell: error ± std over the sine's periods ± std over {self.replicates} "
+            "bootstrap refits on the estimation periods (docs/design.md §7.7).\n\n"
+        )
+
+
+@dataclass
 class IdentificationResult:
     config: IdentificationConfig
     fs: float
@@ -76,6 +98,8 @@ class IdentificationResult:
     # clustering changed (pipeline.clustering_effect()).
     no_clustering: "IdentificationResult | None" = None
     clustering_effect: dict[str, Any] = field(default_factory=dict)
+    # Table 1's estimation spread (config.bootstrap > 0, final identification only).
+    bootstrap: EstimationSpread | None = None
 
     @property
     def clean(self) -> bool:
@@ -97,12 +121,19 @@ class IdentificationResult:
         levels, freqs = self.level_names, self.sine_freqs
         tables: dict[str, tuple[str, str]] = {}
         if self.sines_planned or freqs:
+            boot = self.bootstrap
             tables["table1_all_levels"] = table1(
-                self.errors_all, levels, freqs, spreads=self.spreads_all
-            )
+                self.errors_all, levels, freqs, spreads=self.spreads_all,
+                estimation_spreads=None if boot is None else boot.spreads_all,
+            )  # fmt: skip
             tables["table1_level1"] = table1(
-                self.errors_level1, levels, freqs, spreads=self.spreads_level1
-            )
+                self.errors_level1, levels, freqs, spreads=self.spreads_level1,
+                estimation_spreads=None if boot is None else boot.spreads_level1,
+            )  # fmt: skip
+            if boot is not None:
+                for key in ("table1_all_levels", "table1_level1"):
+                    md, csv_text = tables[key]
+                    tables[key] = (boot.note + md, csv_text)
             if self.no_clustering is not None:
                 tables["table1_no_clustering"] = table1(
                     self.no_clustering.errors_all,
@@ -149,6 +180,16 @@ class IdentificationResult:
                 # Table 1's ± (same rows; null where undefined: one period, a diverged PNLSS).
                 "all_levels_std": _spread_rows(self.spreads_all),
                 "level1_std": _spread_rows(self.spreads_level1),
+                # Table 1's estimation spread (config.bootstrap; null rows where not run).
+                "bootstrap_replicates": None
+                if self.bootstrap is None
+                else self.bootstrap.replicates,
+                "all_levels_bootstrap_std": None
+                if self.bootstrap is None
+                else _spread_rows(self.bootstrap.spreads_all),
+                "level1_bootstrap_std": None
+                if self.bootstrap is None
+                else _spread_rows(self.bootstrap.spreads_level1),
                 "held_out_levels": self.held_out_errors,
             },
             "table1": {

@@ -61,7 +61,7 @@ from .models import LinearStateSpace, PNLSSModel
 from .monomials import STRUCTURES, check_degrees
 from .pnlss import EQUATIONS, fit_pnlss, output_equation_start, stress_periods
 
-__all__ = ["Candidate", "ScanResult", "ScanRow", "candidate_grid", "scan_pnlss"]
+__all__ = ["Candidate", "ScanResult", "ScanRow", "candidate_grid", "fit_candidate", "scan_pnlss"]
 
 LinearSource = Callable[[int], LinearStateSpace] | Mapping[int, LinearStateSpace] | None
 

@@ -26,6 +26,7 @@ def table1(
     models: Sequence[str] = TABLE1_MODELS,
     digits: int = 2,
     spreads: Mapping[tuple[str, str, float], float] | None = None,
+    estimation_spreads: Mapping[tuple[str, str, float], float] | None = None,
 ) -> tuple[str, str]:
     """The paper's Table 1: relative RMS errors, rows = models, columns = levels × frequencies.
 
@@ -40,6 +41,10 @@ def table1(
             standard deviation over the sine's periods of the per-period error
             (metrics.relative_rms_error_spread). A finite spread is shown as
             "error ± spread" in Markdown; a missing or NaN one leaves the cell as it is.
+        estimation_spreads: the same keys: the std of the error over bootstrap refits on the
+            estimation periods (bootstrap.py). Shown as a second "± s" after the spread in
+            Markdown ("–" in its place when the first is missing), and in the CSV as a
+            "<column> estimation std" column after the "<column> std" one.
 
     Returns:
         (markdown, csv_text). Columns: "model", then "<level> <freq> Hz" for each level, and
@@ -68,12 +73,13 @@ def table1(
 
     cells = place(errors)
     spread_cells = {k: v for k, v in place(spreads or {}).items() if np.isfinite(v)}
+    boot_cells = {k: v for k, v in place(estimation_spreads or {}).items() if np.isfinite(v)}
     columns = [_column_name(lv, f) for lv in levels for f in freqs_arr]
     header = ["model", *columns]
-    with_std = spreads is not None
-    header_csv = ["model"] + [
-        name for c in columns for name in ((c, f"{c} std") if with_std else (c,))
-    ]
+    with_boot = estimation_spreads is not None
+    with_std = spreads is not None or with_boot
+    suffixes = ("",) + ((" std",) if with_std else ()) + ((" estimation std",) if with_boot else ())
+    header_csv = ["model"] + [c + sfx for c in columns for sfx in suffixes]
     rows_md: list[list[str]] = []
     rows_csv: list[list[str]] = []
     for model in models:
@@ -82,13 +88,18 @@ def table1(
             for i in range(freqs_arr.size):
                 cell = cells.get((model, level, i))
                 spread = spread_cells.get((model, level, i))
+                boot = boot_cells.get((model, level, i))
                 text = "–" if cell is None else f"{cell:.{digits}f}"
-                if cell is not None and spread is not None:
-                    text += f" ± {spread:.{digits}f}"
+                if cell is not None and (spread is not None or boot is not None):
+                    text += " ± " + ("–" if spread is None else f"{spread:.{digits}f}")
+                if cell is not None and boot is not None:
+                    text += f" ± {boot:.{digits}f}"
                 md.append(text)
                 cs.append("" if cell is None else repr(cell))
                 if with_std:
                     cs.append("" if spread is None else repr(spread))
+                if with_boot:
+                    cs.append("" if boot is None else repr(boot))
         rows_md.append(md)
         rows_csv.append(cs)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]

@@ -244,3 +244,35 @@ def test_figures_are_written_as_png(tmp_path: Path) -> None:
     assert_png(path)
     with pytest.raises(ValueError, match=r"\(P, M\)"):
         plot_clusters(labels, tmp_path / "bad.png", y=data.y[:, :2])
+
+
+def test_table1_with_estimation_spreads_shows_both() -> None:
+    """The bootstrap's estimation spread (bootstrap.py): a second ± in Markdown, an
+    "estimation std" column after each "std" column in the CSV; the rest unchanged."""
+    errors = paper_errors()
+    spreads = {("BLA FRF", "low", 0.4): 0.0123, ("BLA SS", "medium", 1.0): 0.05}
+    boot = {
+        ("BLA FRF", "low", 0.4): 0.031,
+        ("PNLSS", "low", 1.0): 0.02,  # no period spread: "–" in its place
+        ("BLA SS", "medium", 1.0): float("nan"),  # undefined: only the period spread
+    }
+    markdown, csv_text = table1(errors, LEVELS, FREQS, spreads=spreads, estimation_spreads=boot)
+    with_periods, periods_csv = table1(errors, LEVELS, FREQS, spreads=spreads)
+    lines = markdown.strip().splitlines()
+    assert lines[2].startswith("| BLA FRF | 0.52 ± 0.01 ± 0.03 | 0.14 |")
+    assert "| 0.68 ± 0.05 |" in lines[3]
+    assert lines[4].startswith("| PNLSS | 0.02 | 0.03 ± – ± 0.02 | 0.05 |")
+    rows = list(csv.reader(io.StringIO(csv_text)))
+    columns = [f"{lv} {f:g} Hz" for lv in LEVELS for f in FREQS]
+    assert rows[0] == ["model"] + [
+        c for col in columns for c in (col, f"{col} std", f"{col} estimation std")
+    ]
+    table = {r[0]: dict(zip(rows[0], r, strict=True)) for r in rows[1:]}
+    assert float(table["BLA FRF"]["low 0.4 Hz estimation std"]) == 0.031
+    assert table["BLA SS"]["medium 1 Hz estimation std"] == ""
+    # The value and "std" columns are those of the table without estimation spreads.
+    for row in csv.DictReader(io.StringIO(periods_csv)):
+        assert all(table[row["model"]][k] == v for k, v in row.items())
+    assert with_periods.count("±") == 2
+    with pytest.raises(ValueError, match="not in the table layout"):
+        table1(errors, LEVELS, FREQS, estimation_spreads={("PNLSS", "low", 0.5): 0.01})
