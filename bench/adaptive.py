@@ -13,13 +13,17 @@ sim_actuator.seed:=S``, and compares:
 
     .venv/bin/python bench/adaptive.py [--seeds 0 1 2] [--out DIR] [--reuse]
                                        [--plan default] [-p NODE.PARAM:=VALUE ...]
-                                       [--bootstrap B]
+                                       [--bootstrap B] [--common-sines]
 
 ``--bootstrap B`` refits every run's bag with ``aero-rig fit BAG --bootstrap B`` (into
 ``<run>/fit_bootstrap``; reused with ``--reuse``) and compares those tables: each cell's spread
 is then sqrt(s² + b²), s the std over the sine's periods and b the std over B bootstrap refits
 on the estimation periods (docs/design.md §7.7), so that "within its spread" includes the
 models' estimation scatter.
+
+``--common-sines`` also identifies each adaptive run again from its bag and scores its models
+on the fixed run's sine records (``identify(..., models_from=...)``): both tables then rest on
+the same validation data, and a difference is the models'.
 
 ``--reuse`` reads the runs already in DIR (``fixed_<seed>``, ``adaptive_<seed>``) instead of
 running them again, and runs only the missing ones. ``-p`` is passed to both runs of every
@@ -97,20 +101,52 @@ def table1(run_dir: Path) -> dict[tuple[str, str], tuple[float, float]]:
     return cells
 
 
-def compare(fixed: Path, adaptive: Path) -> dict[str, Any]:
-    account = json.loads((adaptive / "models.json").read_text())["experiment"]
-    planned = json.loads((fixed / "models.json").read_text())["experiment"]
-    a, f = table1(adaptive), table1(fixed)
-    outside = []
-    worst = 0.0
-    for key, (value, _) in a.items():
-        ref, spread = f[key]
+def on_common_sines(fixed: Path, adaptive: Path) -> dict[tuple[str, str], float]:
+    """Table 1 (all levels) of the adaptive run's models, identified again from its bag with
+    its recorded parameters, scored on the fixed run's sine records: the same validation data
+    as the fixed run's table, so that a difference is the models' and not the sines' (the
+    adaptive plan's shorter levels move the sines to other stall episodes of the plant)."""
+    import dataclasses
+
+    from aero_identification.campaign_dataset import campaign_dataset
+    from aero_identification.pipeline import identify
+    from aero_rig.offline import read_campaign_bag, recorded_config
+
+    def load(run: Path) -> Any:
+        data = read_campaign_bag(run / "bag")
+        config = dataclasses.replace(recorded_config(data), bootstrap=0, clustering_ablation=False)
+        dataset = campaign_dataset(data.assembler, final=True, min_periods=config.min_periods)
+        return dataset, config
+
+    adaptive_data, config = load(adaptive)
+    fixed_data, _ = load(fixed)
+    models = identify(adaptive_data, config, final=True)
+    scored = identify(fixed_data, config, final=True, models_from=models)
+    return {(m, f"{lv} {f:g} Hz"): e for (m, lv, f), e in scored.errors_all.items()}
+
+
+def within(
+    values: dict[tuple[str, str], float], reference: dict[tuple[str, str], tuple[float, float]]
+) -> tuple[list[str], float]:
+    """The cells of ``values`` outside the reference cell's spread, and the largest difference
+    in units of that spread."""
+    outside, worst = [], 0.0
+    for key, value in values.items():
+        ref, spread = reference[key]
         if not (math.isfinite(value) and math.isfinite(ref)):
             continue
         units = abs(value - ref) / spread if spread > 0 else math.inf
         worst = max(worst, units)
         if units > 1.0:
             outside.append(f"{key[0]} {key[1]}: {value:.3f} vs {ref:.3f} ± {spread:.3f}")
+    return outside, worst
+
+
+def compare(fixed: Path, adaptive: Path) -> dict[str, Any]:
+    account = json.loads((adaptive / "models.json").read_text())["experiment"]
+    planned = json.loads((fixed / "models.json").read_text())["experiment"]
+    a, f = table1(adaptive), table1(fixed)
+    outside, worst = within({k: v for k, (v, _) in a.items()}, f)
     return {
         "multisine_s": account["multisine_executed_s"],
         "fixed_multisine_s": planned["multisine_executed_s"],
@@ -146,6 +182,10 @@ def main() -> int:
     )
     parser.add_argument("-p", dest="params", action="append", default=[], metavar="NODE.P:=V")
     parser.add_argument(
+        "--common-sines", action="store_true",
+        help="also score the adaptive run's models on the fixed run's sine records",
+    )  # fmt: skip
+    parser.add_argument(
         "--bootstrap", type=int, default=0, metavar="B",
         help="refit each bag with `aero-rig fit --bootstrap B` and compare with its spreads",
     )  # fmt: skip
@@ -163,6 +203,19 @@ def main() -> int:
                 walls[f"{mode}_fit"] = round(refit(run_dir, args.bootstrap, args.reuse))
         result = compare(out / f"fixed_{seed}", out / f"adaptive_{seed}")
         result["wall_s"] = walls
+        if args.common_sines:
+            common = on_common_sines(out / f"fixed_{seed}", out / f"adaptive_{seed}")
+            off, worst = within(common, table1(out / f"fixed_{seed}"))
+            result["common_sines"] = {
+                "cells_outside_spread": off,
+                "worst_difference_in_spreads": round(worst, 2),
+                "table1_adaptive": {f"{m} | {c}": round(v, 3) for (m, c), v in common.items()},
+            }
+            print(f"seed {seed}, the adaptive run's models on the fixed run's sines: "
+                  f"{len(common) - len(off)} of {len(common)} cells within the fixed run's "
+                  f"spread (worst {worst:.2f} spreads)")  # fmt: skip
+            for line in off:
+                print(f"  outside: {line}")
         results[str(seed)] = result
         print(
             f"seed {seed}: multisine {result['multisine_s']:.0f} s of "
