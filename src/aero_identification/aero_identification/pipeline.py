@@ -214,7 +214,8 @@ def _identify(
                 dataset, plain, final=True, client=client, held_out=held_out, log=say
             )
         else:  # one cluster everywhere: every valid period was used, the same identification
-            result.no_clustering = dataclasses.replace(result, config=plain)
+            # (its config has no bootstrap, so neither has it)
+            result.no_clustering = dataclasses.replace(result, config=plain, bootstrap=None)
         result.clustering_effect = clustering_effect(result, result.no_clustering)
         result.timings_s["no_clustering"] = time.perf_counter() - t0
     _finish(dataset, result, t_start)
@@ -722,14 +723,14 @@ def _refit_pnlss(
     diverges on the held-out periods (the scan would not have kept it)."""
     cand, max_iter, stress = how
     data, validation, _ = pnlss_sets(levels, config)
+    if validation is None:
+        return None
     low = levels[0]
     assert low.linear is not None and low.bla is not None
     lin = low.linear
     if cand.nx != lin.nx:
         u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
         lin = fit_linear_ss(low.bla, nx=cand.nx).with_operating_point(u0, y0)
-    if validation is None:
-        return None
     options = {
         "max_iter": max_iter,
         "record_weights": _level_weights(data, config.level_weighting),
