@@ -379,3 +379,29 @@ def test_final_identification_with_the_estimation_bootstrap(campaign, tmp_path) 
     assert errors["bootstrap_replicates"] == 3
     rows = {(m, lv, f): s for m, lv, f, s in errors["all_levels_bootstrap_std"]}
     assert rows[("PNLSS", "high", 1.6)] == boot.spreads_all[("PNLSS", "high", 1.6)]
+
+
+def test_estimation_bootstrap_refits_on_the_given_dask_client(campaign) -> None:
+    """identify(client=...): the bootstrap's PNLSS refits run on the scan's executor (one Dask
+    task per refit, here an in-process worker) and give the spreads of the serial run."""
+    from dask.distributed import Client, LocalCluster
+
+    asm = _assemble(campaign)
+    config = IdentificationConfig(
+        bootstrap=3, clustering_ablation=False, scan_nx=(1,), scan_degrees=((2,),),
+        scan_max_iter=10, scan_workers=1,
+    )  # fmt: skip
+    serial = identify(asm, config, final=True)
+    said: list[str] = []
+    with (
+        LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        on_dask = identify(asm, config, final=True, client=client, log=said.append)
+    line = next(m for m in said if m.startswith("Table 1 estimation bootstrap"))
+    assert "3 replicates, 6 PNLSS refits (Dask client" in line, line
+    assert serial.bootstrap is not None and on_dask.bootstrap is not None
+    assert on_dask.bootstrap.spreads_all == serial.bootstrap.spreads_all
+    assert on_dask.bootstrap.spreads_level1 == serial.bootstrap.spreads_level1

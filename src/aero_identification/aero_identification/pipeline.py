@@ -53,7 +53,7 @@ from .models import LinearStateSpace, PNLSSModel
 from .monomials import structure_exponents
 from .pnlss import fit_pnlss, one_blas_thread, output_equation_start
 from .results import EstimationSpread, IdentificationResult, LevelResult
-from .scan import Candidate, ScanResult, fit_candidate, scan_pnlss
+from .scan import Candidate, ScanResult, run_fits, scan_pnlss
 from .subspace import fit_linear_ss
 
 # Largest Levenberg–Marquardt Jacobian a PNLSS fit may hold (bytes): one (samples × parameters)
@@ -94,7 +94,8 @@ def identify(
             online node does this when only sine records completed since its last refit).
         previous: the last refit, whose level-1 PNLSS is reused when the level-1 periods it was
             trained on did not change (the fit is deterministic, so reuse gives the same model).
-        client: a ``dask.distributed.Client`` for the structure scan; None: local processes.
+        client: a ``dask.distributed.Client`` for the structure scan and the bootstrap refits;
+            None: local processes.
         held_out: names of levels kept out of every fit, for validation errors.
         log: progress messages.
     """
@@ -140,7 +141,7 @@ def _identify(
         result.timings_s = {"bla": 0.0, "pnlss": 0.0}
         _validate(dataset, result)
         if final and config.bootstrap > 0:
-            _estimation_bootstrap(dataset, result, config, say)
+            _estimation_bootstrap(dataset, result, config, client, say)
         if result.no_clustering is not None:
             result.no_clustering = identify(
                 dataset, result.no_clustering.config, final, models_from=result.no_clustering,
@@ -201,7 +202,7 @@ def _identify(
     # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
     _validate(dataset, result)
     if final and config.bootstrap > 0:
-        _estimation_bootstrap(dataset, result, config, say)
+        _estimation_bootstrap(dataset, result, config, client, say)
 
     # 5. The ablation: the same pipeline on every valid period (final identification only).
     if final and config.clustering and config.clustering_ablation:
@@ -713,14 +714,15 @@ def _refit_candidates(
     return every, (single if result.pnlss_level1 is not None else None)
 
 
-def _refit_pnlss(
+def _refit_job(
     levels: Sequence[LevelResult],
     how: tuple[Candidate, int, float | None],
     config: IdentificationConfig,
-) -> PNLSSModel | None:
+) -> tuple[Candidate, LinearStateSpace, tuple[PeriodicData, PeriodicData], dict[str, Any]] | None:
     """One PNLSS fit of a given structure on `pnlss_sets(levels)`, from the lowest level's
-    linear model (at the candidate's order, as the scan starts it); None when it fails or
-    diverges on the held-out periods (the scan would not have kept it)."""
+    linear model (at the candidate's order, as the scan starts it), as a job for
+    `scan.run_fits`: the candidate, its start, its (training, held-out) sets and options; None
+    when there are no held-out periods (the scan could not have scored it)."""
     cand, max_iter, stress = how
     data, validation, _ = pnlss_sets(levels, config)
     if validation is None:
@@ -737,26 +739,58 @@ def _refit_pnlss(
         "validation_weights": _level_weights(validation, config.level_weighting),
         "stress": stress,
     }
-    row, model = fit_candidate(cand, lin, data, validation, options)
-    return model if row.status == "ok" else None
+    return cand, lin, (data, validation), options
+
+
+def _run_refits(
+    wanted: list[tuple[Candidate, LinearStateSpace, tuple[PeriodicData, PeriodicData], Any]],
+    config: IdentificationConfig,
+    client: Any,
+) -> tuple[list[PNLSSModel | None], str]:
+    """The refits' models (None where a fit failed, diverged or failed the scan's check: the
+    scan would not have kept it), on the scan's executor: ``client`` (identify's), the Dask
+    scheduler at ``scan_scheduler``, local worker processes (``scan_workers``) or this
+    process."""
+    if not wanted:
+        return [], "no refit"
+    jobs = [(cand, lin, k, options) for k, (cand, lin, _, options) in enumerate(wanted)]
+    sets = [pair for _, _, pair, _ in wanted]
+    if client is None and config.scan_scheduler:
+        from dask.distributed import Client
+
+        with Client(config.scan_scheduler, timeout="30s") as remote:
+            fits, where = run_fits(jobs, sets, remote)
+    else:
+        fits, where = run_fits(jobs, sets, client, workers=config.scan_workers or None)
+    return [model if row.status == "ok" else None for row, model in fits], where
 
 
 def _estimation_bootstrap(
-    dataset: Dataset, result: IdentificationResult, config: IdentificationConfig, say: Log
+    dataset: Dataset,
+    result: IdentificationResult,
+    config: IdentificationConfig,
+    client: Any,
+    say: Log,
 ) -> None:
     """Table 1's estimation spread (bootstrap.py): ``config.bootstrap`` replicates, each with
     every estimation level's kept periods drawn with replacement within each realization, the
     level's BLA and linear model refitted at the estimate's order on the estimate's clusters,
     the all-levels and level-1 PNLSS refitted with the estimate's structures, and Table 1
-    scored; each cell's spread is the std over the replicates (fixed seed: reproducible)."""
+    scored; each cell's spread is the std over the replicates (fixed seed: reproducible).
+    The replicates are drawn and their linear models fitted here, in order; their PNLSS refits,
+    the cost, are independent fits and run on the scan's executor (`_run_refits`)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     every, level1 = _refit_candidates(result, config)
+    # One structure for both tables: the level-1 PNLSS is the all-levels one, not refitted.
+    same = level1 is not None and result.pnlss_level1 is result.pnlss_all and every == level1
     quiet: Log = lambda _m: None  # noqa: E731
-    replicates_all: list[dict[Cell, float]] = []
-    replicates_level1: list[dict[Cell, float]] = []
+    replicates: list[IdentificationResult] = []
+    wanted: list[Any] = []  # the refit jobs of every replicate
+    slots: list[tuple[IdentificationResult, str]] = []  # where each job's model goes
     for _ in range(config.bootstrap):
         rep = IdentificationResult(config=config, fs=result.fs, sines_planned=result.sines_planned)
+        replicates.append(rep)
         for name, res in result.levels.items():
             data = res.record.data
             if res.role != "estimation" or data is None or res.linear is None:
@@ -775,11 +809,24 @@ def _estimation_bootstrap(
         estimation = [r for r in rep.levels.values() if r.role == "estimation"]
         ready = [r for r in estimation if r.bla is not None and r.linear is not None]
         rep.linear_level1 = estimation[0].linear if estimation else None
-        if every is not None and ready and ready[0] is estimation[0]:
-            rep.pnlss_all = _refit_pnlss(ready, every, config)
-        if level1 is not None and ready and ready[0] is estimation[0]:
-            same = result.pnlss_level1 is result.pnlss_all and every == level1
-            rep.pnlss_level1 = rep.pnlss_all if same else _refit_pnlss(ready[:1], level1, config)
+        if not ready or ready[0] is not estimation[0]:
+            continue
+        for how, levels, slot in (
+            (every, ready, "pnlss_all"),
+            (None if same else level1, ready[:1], "pnlss_level1"),
+        ):
+            job = None if how is None else _refit_job(levels, how, config)
+            if job is not None:
+                wanted.append(job)
+                slots.append((rep, slot))
+    models, where = _run_refits(wanted, config, client)
+    for (rep, slot), fitted in zip(slots, models, strict=True):
+        setattr(rep, slot, fitted)
+    replicates_all: list[dict[Cell, float]] = []
+    replicates_level1: list[dict[Cell, float]] = []
+    for rep in replicates:
+        if same:
+            rep.pnlss_level1 = rep.pnlss_all
         _validate(dataset, rep)
         replicates_all.append(dict(rep.errors_all))
         replicates_level1.append(dict(rep.errors_level1))
@@ -803,8 +850,8 @@ def _estimation_bootstrap(
                 )
     result.timings_s["bootstrap"] = result.bootstrap.seconds
     say(
-        f"Table 1 estimation bootstrap: {config.bootstrap} replicates, "
-        f"{result.bootstrap.seconds:.1f} s"
+        f"Table 1 estimation bootstrap: {config.bootstrap} replicates, {len(wanted)} PNLSS "
+        f"refits ({where}), {result.bootstrap.seconds:.1f} s"
     )
 
 

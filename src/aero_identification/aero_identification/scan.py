@@ -268,15 +268,17 @@ def scan_pnlss(
     grid = candidate_grid(nx, degrees, equations, structures, starts)
     linears = _linear_models(data, sorted({c.nx for c in grid}), linear)
     sets = [(data, validation), *splits]
-    jobs = [(c, linears[c.nx], k) for c in grid for k in range(len(sets))]
     options = {
         "max_iter": int(max_iter),
         "record_weights": record_weights,
         "validation_weights": validation_weights,
         "stress": stress,
     }
+    jobs = [
+        (c, linears[c.nx], k, _split_options(options, k)) for c in grid for k in range(len(sets))
+    ]
     t0 = time.perf_counter()
-    results, where = _run(jobs, sets, options, client, workers)
+    results, where = run_fits(jobs, sets, client, workers)
     per = len(sets)
     rows = [cross_fit([r for r, _ in results[i : i + per]]) for i in range(0, len(results), per)]
     models = [results[i][1] for i in range(0, len(results), per)]
@@ -369,23 +371,27 @@ def _linear_models(
     return {n: linear[n] for n in orders}
 
 
-Job = tuple[Candidate, LinearStateSpace, int]  # the candidate, its start, its split
+# A fit to run: the candidate, its start, the index of its (training, held-out) set, and
+# fit_candidate's options.
+Job = tuple[Candidate, LinearStateSpace, int, dict[str, Any]]
 
 
-def _run(
-    jobs: list[Job],
-    sets: list[tuple[PeriodicData, PeriodicData]],
-    options: dict[str, Any],
-    client: Any,
-    workers: int | None,
+def run_fits(
+    jobs: Sequence[Job],
+    sets: Sequence[tuple[PeriodicData, PeriodicData]],
+    client: Any = None,
+    workers: int | None = None,
 ) -> tuple[list[tuple[ScanRow, PNLSSModel | None]], str]:
+    """Every job's ``fit_candidate`` (in the jobs' order), and where they ran: in this process
+    (``workers`` 1, or a single job), on a local Dask cluster of ``workers`` single-threaded
+    worker processes (None: every core), or on ``client``. The scan's fits and the estimation
+    bootstrap's refits (pipeline.py) both run here."""
     if client is None:
         n = workers if workers is not None else (os.cpu_count() or 1)
         if n < 1:
             raise ValueError(f"workers must be >= 1; got {n}")
         if n == 1 or len(jobs) == 1:
-            fits = [fit_candidate(c, lin, *sets[k], _split_options(options, k))
-                    for c, lin, k in jobs]  # fmt: skip
+            fits = [fit_candidate(c, lin, *sets[k], opts) for c, lin, k, opts in jobs]
             return fits, "serial"
         from dask.distributed import Client, LocalCluster
 
@@ -400,10 +406,10 @@ def _run(
             ) as cluster,
             Client(cluster) as local,
         ):
-            return _on_client(local, jobs, sets, options), (
+            return _on_client(local, jobs, sets), (
                 f"local Dask cluster, {min(n, len(jobs))} worker processes"
             )
-    return _on_client(client, jobs, sets, options), f"Dask client {client}"
+    return _on_client(client, jobs, sets), f"Dask client {client}"
 
 
 @contextlib.contextmanager
@@ -437,23 +443,20 @@ def _workers_without_main_script() -> Iterator[None]:
 
 def _on_client(
     client: Any,
-    jobs: list[Job],
-    sets: list[tuple[PeriodicData, PeriodicData]],
-    options: dict[str, Any],
+    jobs: Sequence[Job],
+    sets: Sequence[tuple[PeriodicData, PeriodicData]],
 ) -> list[tuple[ScanRow, PNLSSModel | None]]:
     # Data once per worker, not once per task; the largest candidates first, so the last
     # task to finish is a small one. One numba thread per fit: the workers are the
     # parallelism (the kernels' own prange over records would oversubscribe the cores).
-    options = {**options, "numba_threads": 1}
     scattered = client.scatter([x for pair in sets for x in pair], broadcast=True)
     order = sorted(range(len(jobs)), key=lambda i: -_size(jobs[i][0]))
     futures = {}
     for i in order:
-        c, lin, k = jobs[i]
+        c, lin, k, options = jobs[i]
         data_f, val_f = scattered[2 * k], scattered[2 * k + 1]
-        futures[i] = client.submit(
-            fit_candidate, c, lin, data_f, val_f, _split_options(options, k), pure=False
-        )
+        options = {**options, "numba_threads": 1}
+        futures[i] = client.submit(fit_candidate, c, lin, data_f, val_f, options, pure=False)
     return [futures[i].result() for i in range(len(jobs))]
 
 
