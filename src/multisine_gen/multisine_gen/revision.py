@@ -10,8 +10,9 @@ aero_identification.adaptive, docs/design.md §7.9):
 - ``finish_level``: the level now streaming ends after its realization now streaming (never
   below ``min_realizations`` realizations);
 - ``add_realization``: one more phase realization for a level that has not ended (at most
-  ``max_realizations``), drawn from the plan's seed as ``build_plan`` draws realization m, so it
-  is the realization a plan designed with one more would have had.
+  ``max_realizations``), drawn from the plan's seed as ``build_plan`` draws realization m, and
+  crest-factor reduced when the level's realizations were, so it is the realization a plan
+  designed with one more would have had.
 
 :func:`revise` turns a request into the next revision of the plan. Only segments that have not
 started change: a revision takes effect at the next segment boundary after the sample the
@@ -31,6 +32,8 @@ from typing import Literal
 import numpy as np
 
 from multisine_gen.campaigns import derived_seed
+from multisine_gen.crest import reduce_crest_factor
+from multisine_gen.multisine import Multisine
 from multisine_gen.plan import ExperimentPlan, MultisineLevel, PlanError, Segment
 from rig_runtime.interface import ActuatorLimits
 
@@ -159,6 +162,19 @@ def _level_segments(plan: ExperimentPlan, level: int) -> list[Segment]:
     ]
 
 
+def _drawn_phases(seed: int, lines: int) -> np.ndarray:
+    """The phases random_phase_multisine draws with ``seed`` (multisine.py)."""
+    return np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, size=lines)
+
+
+def _as_drawn(realization: Multisine) -> bool:
+    """The realization's phases are its seed's random draw (not crest-factor reduced)."""
+    seed = realization.seed
+    return seed is not None and bool(
+        np.allclose(realization.phases, _drawn_phases(seed, realization.phases.size))
+    )
+
+
 def revise(
     plan: ExperimentPlan,
     next_k: int,
@@ -238,8 +254,14 @@ def revise(
         first = realizations[0]
         seed = derived_seed(int(plan.seed), 1, i, m)
         # build_plan's draw for realization m of level position i (campaigns.py).
-        phases = np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, size=first.phases.size)
-        realizations.append(dataclasses.replace(first, phases=phases, seed=seed))
+        added = first.with_phases(_drawn_phases(seed, first.phases.size), seed=seed)
+        if any(not _as_drawn(r) for r in realizations):
+            # The plan's realizations were crest-factor reduced (build_plan's
+            # crest_factor_reduction; a plan file may carry other designed phases): the added
+            # one is reduced the same way, so that it peaks no further from its mean than the
+            # level's do (Pintelon & Schoukens 2012 §3.2; crest.py).
+            added = reduce_crest_factor(added)
+        realizations.append(added)
         counts.append(lv.periods)
         change = f"{where}: realization {m} added ({m + 1} realizations, {lv.periods} periods)"
     uniform = all(c == lv.periods for c in counts)

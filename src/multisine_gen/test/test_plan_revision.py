@@ -123,6 +123,31 @@ def test_an_added_realization_is_the_one_a_larger_plan_would_have_drawn(
         revise(plan, p.start_k + 1, PlanRequest("add_realization", 1, p.start_k), BOUNDS)
 
 
+def test_an_added_realization_is_crest_factor_reduced_when_the_plans_were() -> None:
+    """A plan designed with crest-factor reduction gets an added realization reduced the same
+    way (the one a plan designed with one more realization has; its crest factor that low),
+    also after the plan went through its JSON message; a plan without keeps random phases."""
+    design = dict(
+        N=2_000, f_min_hz=0.1, offsets_deg=(6.6, 19.9), periods=4,
+        sine_frequencies_hz=(1.0, 1.6), sine_offsets_deg=(5.9, 19.3), sine_min_periods=5,
+        sine_min_duration_s=0.0, sine_settle_s=0.0, ramp_rate_deg_s=10.0, seed=3,
+    )  # fmt: skip
+    for reduced in (True, False):
+        plan = build_plan(realizations=2, crest_factor_reduction=reduced, **design)  # type: ignore[arg-type]
+        larger = build_plan(realizations=3, crest_factor_reduction=reduced, **design)  # type: ignore[arg-type]
+        plan = plan_from_json(plan_to_json(plan))  # what the generator reads from a file
+        p = _period(plan, 1, 1, 3)
+        rev = revise(plan, p.start_k + 1, PlanRequest("add_realization", 1, p.start_k), BOUNDS)
+        added = rev.plan.levels[1].realizations[2]
+        expected = larger.levels[1].realizations[2]
+        np.testing.assert_allclose(added.phases, expected.phases, rtol=0, atol=1e-12)
+        crest = [r.crest_factor() for r in plan.levels[1].realizations]
+        if reduced:
+            assert added.crest_factor() < 1.8 and added.crest_factor() <= max(crest) + 0.1
+        else:
+            assert added.crest_factor() > 2.0  # a random-phase draw: about 2.4-3.2
+
+
 def test_requests_on_a_level_that_ended_or_is_not_streaming_are_refused(
     short: ExperimentPlan,
 ) -> None:
