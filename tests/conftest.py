@@ -7,6 +7,9 @@ test`` runs them.
 from pathlib import Path
 
 import pytest
+from graph_support import small_plan_design
+
+from multisine_gen.plan_format import plan_to_json
 
 HERE = Path(__file__).resolve().parent
 
@@ -15,3 +18,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if item.path.resolve().is_relative_to(HERE):
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(scope="session")
+def small_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """small_plan_design() as a plan file, what the generator's ``plan`` parameter takes."""
+    path = tmp_path_factory.mktemp("plan") / "small.json"
+    path.write_text(plan_to_json(small_plan_design()))
+    return path

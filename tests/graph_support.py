@@ -5,6 +5,8 @@ from typing import Any
 
 import numpy as np
 
+from multisine_gen.campaigns import build_plan
+from multisine_gen.plan import ExperimentPlan
 from rig_runtime.barrier import ReadinessReport
 from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY
 from rig_runtime.messages import stamp_to_ns
@@ -106,3 +108,28 @@ class PeerReaders:
             if e.kind == kind and e.topic in topics
         ]
         return {e.topic for e in ends} >= set(topics) and all(e.matched_count > 0 for e in ends)
+
+
+def small_plan_design() -> ExperimentPlan:
+    """A small plan for the graph tests that stream a plan but identify nothing from it: the
+    short plan's grid and levels' design, one level (6.6°), two realizations of 2 periods, one
+    1 Hz sine: 69 s of experiment (13,8xx samples) against the short plan's 225 s."""
+    return build_plan(
+        N=2_000,
+        f_min_hz=0.1,
+        f_max_hz=1.98,
+        offsets_deg=(6.6,),
+        realizations=2,
+        periods=2,
+        settle_periods=1,
+        crest_factor_reduction=False,
+        sine_frequencies_hz=(1.0,),
+        sine_offsets_deg=(5.9,),
+        sine_min_periods=5,
+        sine_min_duration_s=0.0,
+        sine_settle_s=0.0,
+        baseline=None,
+        ramp_rate_deg_s=10.0,
+        seed=0,
+        limits=None,
+    )

@@ -1,9 +1,10 @@
 """Fault injection on the campaign graph (issue: trust under load and faults).
 
 Each case runs the real process graph on Cyclone DDS with a small plan (one level, two
-realizations of 2 periods, one sine: 69 s of experiment) and checks the outcome a user must
-see. The starved and paused runs of the short plan, which must give Table 1 byte for byte, are
-in test_campaign.py; bench/faults.py runs every case on the short plan with figures.
+realizations of 2 periods, one sine: 69 s of experiment; conftest.small_plan) and checks the
+outcome a user must see. The starved and paused runs of the short plan, which must give Table 1
+byte for byte, are in test_campaign.py; bench/faults.py runs every case on the short plan with
+figures.
 """
 
 import json
@@ -17,8 +18,6 @@ import pytest
 import yaml
 from rosbags.highlevel import AnyReader
 
-from multisine_gen.campaigns import build_plan
-from multisine_gen.plan_format import plan_to_json
 from rig_runtime import Node
 from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import (
@@ -41,32 +40,6 @@ from rig_runtime.testing import (
 )
 
 SIM_GRAPH = package_share("aero_rig") / "config" / "sim.yaml"
-
-
-@pytest.fixture(scope="module")
-def small_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    plan = build_plan(
-        N=2_000,
-        f_min_hz=0.1,
-        f_max_hz=1.98,
-        offsets_deg=(6.6,),
-        realizations=2,
-        periods=2,
-        settle_periods=1,
-        crest_factor_reduction=False,
-        sine_frequencies_hz=(1.0,),
-        sine_offsets_deg=(5.9,),
-        sine_min_periods=5,
-        sine_min_duration_s=0.0,
-        sine_settle_s=0.0,
-        baseline=None,
-        ramp_rate_deg_s=10.0,
-        seed=0,
-        limits=None,
-    )
-    path = tmp_path_factory.mktemp("plan") / "small.json"
-    path.write_text(plan_to_json(plan))
-    return path
 
 
 def _campaign(*args: str, env: dict[str, str]) -> subprocess.Popen[str]:

@@ -1,12 +1,11 @@
-"""Generator (short plan) drives the simulated actuator, as separate processes on DDS."""
+"""Generator (the small plan) drives the simulated actuator, as separate processes on DDS."""
 
 import json
 from pathlib import Path
 
 import numpy as np
-from graph_support import Observer, PeerReaders
+from graph_support import Observer, PeerReaders, small_plan_design
 
-from multisine_gen.campaigns import short_plan
 from pitch_actuator.dynamics import ActuatorModel
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, PITCH_COMMAND, PITCH_STATE
 from rig_runtime.testing import Processes, graph_env, join_graph
@@ -19,10 +18,12 @@ TOPICS = {
 }
 
 
-def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeypatch) -> None:
+def test_generator_drives_sim_actuator_every_sample_once(
+    small_plan: Path, tmp_path: Path, monkeypatch
+) -> None:
     env = graph_env()
     join_graph(env, monkeypatch.setenv)
-    plan = short_plan(seed=3)
+    plan = small_plan_design()
     observer = Observer(TOPICS)
     try:
         with Processes(env, log_dir=tmp_path) as procs:
@@ -37,9 +38,7 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
                 "generator",
                 "--ros-args",
                 "-p",
-                "plan:=short",
-                "-p",
-                "seed:=3",
+                f"plan:={small_plan}",
                 "-p",
                 "real_time_factor:=0.0",
                 "-p",
