@@ -1,5 +1,5 @@
 """``ros2 launch aero_rig sim.launch.py`` (the real launch, launch_ros and ros2launch, Jazzy)
-runs a short campaign from the packages as colcon installs them.
+runs a campaign (the small plan) from the packages as colcon installs them.
 
 Needs the ros2 tools and composition_interfaces in the venv (``make test`` installs them from
 ../shared/ros2-python); skips with one line otherwise. The nodes are the colcon install's
@@ -64,10 +64,16 @@ def _sourced(install: Path, env: dict[str, str]) -> dict[str, str]:
     }
 
 
-def test_sim_launch_runs_a_short_campaign(colcon_install: Path, tmp_path: Path) -> None:
+def test_sim_launch_runs_a_campaign(colcon_install: Path, small_plan: Path, tmp_path: Path) -> None:
+    """The small plan (conftest.small_plan): the launch, the nodes, the run directory and the
+    identifier's exit are what this checks; the short plan's identification is test_campaign's."""
     sim = yaml.safe_load((package_share("aero_rig") / "config" / "sim.yaml").read_text())
     overrides: dict[str, dict[str, Any]] = {
-        "generator": {"plan": "short", "real_time_factor": 0.0, "start_timeout_s": 120.0},
+        "generator": {
+            "plan": str(small_plan),
+            "real_time_factor": 0.0,
+            "start_timeout_s": 120.0,
+        },
         "sim_wing": {"preset": "repeatable_stall"},
         "identifier": {"exit_after_final": True},
     }
