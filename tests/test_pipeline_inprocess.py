@@ -347,6 +347,14 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     assert sum(row["selected"] for row in payload["pnlss_scan"]["table"]) == 1
 
 
+# A small scan (one candidate structure, 10 LM iterations) and 3 replicates: what the bootstrap
+# tests need, in seconds.
+BOOTSTRAP_CONFIG = IdentificationConfig(
+    bootstrap=3, clustering_ablation=False, scan_nx=(1,), scan_degrees=((2,),),
+    scan_max_iter=10, scan_workers=1,
+)  # fmt: skip
+
+
 def test_final_identification_with_the_estimation_bootstrap(campaign, tmp_path) -> None:
     """config.bootstrap: each Table 1 cell gets the std over refits on bootstrap replicates of
     the estimation periods, in the result, both tables and models.json; the estimate itself is
@@ -354,10 +362,7 @@ def test_final_identification_with_the_estimation_bootstrap(campaign, tmp_path) 
     from aero_identification.report import write_report
 
     asm = _assemble(campaign)
-    config = IdentificationConfig(
-        bootstrap=3, clustering_ablation=False, scan_nx=(1,), scan_degrees=((2,),),
-        scan_max_iter=10, scan_workers=1,
-    )  # fmt: skip
+    config = BOOTSTRAP_CONFIG
     result = identify(asm, config, final=True)
     boot = result.bootstrap
     assert result.scan is not None  # the replicates refit the scan's kept structure
@@ -387,10 +392,7 @@ def test_estimation_bootstrap_refits_on_the_given_dask_client(campaign) -> None:
     from dask.distributed import Client, LocalCluster
 
     asm = _assemble(campaign)
-    config = IdentificationConfig(
-        bootstrap=3, clustering_ablation=False, scan_nx=(1,), scan_degrees=((2,),),
-        scan_max_iter=10, scan_workers=1,
-    )  # fmt: skip
+    config = BOOTSTRAP_CONFIG
     serial = identify(asm, config, final=True)
     said: list[str] = []
     with (
