@@ -33,6 +33,12 @@ def test_generator_drives_sim_actuator_every_sample_once(
             peers = PeerReaders(observer.node)
             matched = observer.spin_until(lambda: peers.writers_matched([PITCH_STATE.name]), 60)
             assert matched, procs.log("sim_actuator")
+            # And the generator's writers must be matched by this observer's readers before
+            # the first command, from the readers' side too: the observer joins the generator's
+            # start barrier with its own readiness report, as a graph node does. (Waiting for
+            # the writer's subscriber count alone lost the first 5 s of commands once, on a
+            # loaded machine.)
+            observer.node.start_readiness()
             gen = procs.start_entry(
                 "multisine_gen",
                 "generator",
@@ -45,6 +51,8 @@ def test_generator_drives_sim_actuator_every_sample_once(
                 "flow_control:=false",
                 "-p",
                 "wait_for_subscribers:=2",
+                "-p",
+                "barrier_nodes:=[sim_actuator, test_observer]",
             )
             total = plan.total_samples
             done = observer.spin_until(
