@@ -1,11 +1,12 @@
-"""Generator (the small plan) drives the simulated actuator, as separate processes on DDS."""
+"""Generator (short plan) drives the simulated actuator, as separate processes on DDS."""
 
 import json
 from pathlib import Path
 
 import numpy as np
-from graph_support import Observer, PeerReaders, small_plan_design
+from graph_support import Observer, PeerReaders
 
+from multisine_gen.campaigns import short_plan
 from pitch_actuator.dynamics import ActuatorModel
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, PITCH_COMMAND, PITCH_STATE
 from rig_runtime.testing import Processes, graph_env, join_graph
@@ -18,12 +19,10 @@ TOPICS = {
 }
 
 
-def test_generator_drives_sim_actuator_every_sample_once(
-    small_plan: Path, tmp_path: Path, monkeypatch
-) -> None:
+def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeypatch) -> None:
     env = graph_env()
     join_graph(env, monkeypatch.setenv)
-    plan = small_plan_design()
+    plan = short_plan(seed=3)
     observer = Observer(TOPICS)
     try:
         with Processes(env, log_dir=tmp_path) as procs:
@@ -33,26 +32,20 @@ def test_generator_drives_sim_actuator_every_sample_once(
             peers = PeerReaders(observer.node)
             matched = observer.spin_until(lambda: peers.writers_matched([PITCH_STATE.name]), 60)
             assert matched, procs.log("sim_actuator")
-            # And the generator's writers must be matched by this observer's readers before
-            # the first command, from the readers' side too: the observer joins the generator's
-            # start barrier with its own readiness report, as a graph node does. (Waiting for
-            # the writer's subscriber count alone lost the first 5 s of commands once, on a
-            # loaded machine.)
-            observer.node.start_readiness()
             gen = procs.start_entry(
                 "multisine_gen",
                 "generator",
                 "--ros-args",
                 "-p",
-                f"plan:={small_plan}",
+                "plan:=short",
+                "-p",
+                "seed:=3",
                 "-p",
                 "real_time_factor:=0.0",
                 "-p",
                 "flow_control:=false",
                 "-p",
                 "wait_for_subscribers:=2",
-                "-p",
-                "barrier_nodes:=[sim_actuator, test_observer]",
             )
             total = plan.total_samples
             done = observer.spin_until(

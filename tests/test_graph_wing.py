@@ -4,8 +4,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from graph_support import Observer, small_plan_design
+from graph_support import Observer
 
+from multisine_gen.campaigns import short_plan
 from rig_runtime.interface import PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
 from rig_runtime.testing import Processes, graph_env, join_graph
 
@@ -16,12 +17,10 @@ TOPICS = {
 }
 
 
-def test_every_state_gets_one_coefficients_sample(
-    small_plan: Path, tmp_path: Path, monkeypatch
-) -> None:
+def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -> None:
     env = graph_env()
     join_graph(env, monkeypatch.setenv)
-    total = small_plan_design().total_samples
+    total = short_plan(seed=1).total_samples
     observer = Observer(TOPICS)
     try:
         with Processes(env, log_dir=tmp_path) as procs:
@@ -35,7 +34,9 @@ def test_every_state_gets_one_coefficients_sample(
                 "generator",
                 "--ros-args",
                 "-p",
-                f"plan:={small_plan}",
+                "plan:=short",
+                "-p",
+                "seed:=1",
                 "-p",
                 "real_time_factor:=0.0",
                 "-p",
