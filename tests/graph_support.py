@@ -111,9 +111,10 @@ class PeerReaders:
 
 
 def small_plan_design() -> ExperimentPlan:
-    """A small plan for the graph tests that stream a plan but identify nothing from it: the
-    short plan's grid and levels' design, one level (6.6°), two realizations of 2 periods, one
-    1 Hz sine: 69 s of experiment (13,8xx samples) against the short plan's 225 s."""
+    """A small plan for the graph tests that need a whole campaign but not the short plan's
+    Table 1 (the fault tests, the launch test): the short plan's grid and level design, one
+    level (6.6°), two realizations of 2 periods, one 1 Hz sine: 13,764 samples, 69 s of
+    experiment against the short plan's 225 s."""
     return build_plan(
         N=2_000,
         f_min_hz=0.1,

@@ -282,6 +282,13 @@ def _relative_amplitudes(grid: LineGrid, relative_amplitudes: AmplitudeSpectrum)
     return values
 
 
+def random_phases(seed: int | None, lines: int) -> np.ndarray:
+    """The phases of a random-phase realization: ``lines`` values uniform in [0, 2π) drawn
+    with ``seed`` (random_phase_multisine's draw; an adaptive run's added realization,
+    revision.py, repeats it)."""
+    return np.random.default_rng(seed).uniform(0.0, 2.0 * np.pi, size=lines)
+
+
 def random_phase_multisine(
     grid: LineGrid,
     std_deg: float,
@@ -298,7 +305,7 @@ def random_phase_multisine(
         raise ExcitationError(f"std_deg must be > 0, got {std_deg!r}")
     shape = _relative_amplitudes(grid, relative_amplitudes)
     amplitudes = shape * (std_deg / math.sqrt(float(np.sum(shape**2)) / 2.0))
-    phases = np.random.default_rng(seed).uniform(0.0, 2.0 * np.pi, size=shape.size)
+    phases = random_phases(seed, shape.size)
     return Multisine(
         fs=grid.fs,
         N=grid.N,

@@ -25,7 +25,6 @@ reason, changing nothing. This module is pure: no ROS, no DDS.
 
 import dataclasses
 import json
-import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -33,7 +32,7 @@ import numpy as np
 
 from multisine_gen.campaigns import derived_seed
 from multisine_gen.crest import reduce_crest_factor
-from multisine_gen.multisine import Multisine
+from multisine_gen.multisine import Multisine, random_phases
 from multisine_gen.plan import ExperimentPlan, MultisineLevel, PlanError, Segment
 from rig_runtime.interface import ActuatorLimits
 
@@ -162,16 +161,11 @@ def _level_segments(plan: ExperimentPlan, level: int) -> list[Segment]:
     ]
 
 
-def _drawn_phases(seed: int, lines: int) -> np.ndarray:
-    """The phases random_phase_multisine draws with ``seed`` (multisine.py)."""
-    return np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, size=lines)
-
-
 def _as_drawn(realization: Multisine) -> bool:
     """The realization's phases are its seed's random draw (not crest-factor reduced)."""
     seed = realization.seed
     return seed is not None and bool(
-        np.allclose(realization.phases, _drawn_phases(seed, realization.phases.size))
+        np.allclose(realization.phases, random_phases(seed, realization.phases.size))
     )
 
 
@@ -254,7 +248,7 @@ def revise(
         first = realizations[0]
         seed = derived_seed(int(plan.seed), 1, i, m)
         # build_plan's draw for realization m of level position i (campaigns.py).
-        added = first.with_phases(_drawn_phases(seed, first.phases.size), seed=seed)
+        added = first.with_phases(random_phases(seed, first.phases.size), seed=seed)
         if any(not _as_drawn(r) for r in realizations):
             # The plan's realizations were crest-factor reduced (build_plan's
             # crest_factor_reduction; a plan file may carry other designed phases): the added
