@@ -45,6 +45,14 @@ class Observer:
     def stamps(self, topic: str) -> np.ndarray:
         return np.array([s for s, _ in self.data[topic]], dtype=np.int64)
 
+    def counts(self) -> str:
+        """What arrived, per topic: count, first and last stamp (for a failure's message)."""
+        lines = []
+        for topic, items in sorted(self.data.items()):
+            first, last = (items[0][0], items[-1][0]) if items else (0, 0)
+            lines.append(f"{topic}: {len(items)} messages, stamps {first}..{last} ns\n")
+        return "".join(lines)
+
     def close(self) -> None:
         self.node.close()
 

@@ -1,12 +1,11 @@
-"""Generator (short plan) drives the simulated actuator, as separate processes on DDS."""
+"""Generator (the small plan) drives the simulated actuator, as separate processes on DDS."""
 
 import json
 from pathlib import Path
 
 import numpy as np
-from graph_support import Observer, PeerReaders
+from graph_support import Observer, PeerReaders, small_plan_design
 
-from multisine_gen.campaigns import short_plan
 from pitch_actuator.dynamics import ActuatorModel
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, PITCH_COMMAND, PITCH_STATE
 from rig_runtime.testing import Processes, graph_env, join_graph
@@ -19,10 +18,12 @@ TOPICS = {
 }
 
 
-def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeypatch) -> None:
+def test_generator_drives_sim_actuator_every_sample_once(
+    small_plan: Path, tmp_path: Path, monkeypatch
+) -> None:
     env = graph_env()
     join_graph(env, monkeypatch.setenv)
-    plan = short_plan(seed=3)
+    plan = small_plan_design()
     observer = Observer(TOPICS)
     try:
         with Processes(env, log_dir=tmp_path) as procs:
@@ -32,25 +33,31 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
             peers = PeerReaders(observer.node)
             matched = observer.spin_until(lambda: peers.writers_matched([PITCH_STATE.name]), 60)
             assert matched, procs.log("sim_actuator")
+            # The generator's writers too, seen from both sides, before its first command: the
+            # observer joins the generator's start barrier with its own readiness report, as a
+            # graph node does (docs/design.md §3.5). Fast DDS drops what a reliable, volatile
+            # writer sends before the other side has matched.
+            observer.node.start_readiness()
             gen = procs.start_entry(
                 "multisine_gen",
                 "generator",
                 "--ros-args",
                 "-p",
-                "plan:=short",
-                "-p",
-                "seed:=3",
+                f"plan:={small_plan}",
                 "-p",
                 "real_time_factor:=0.0",
                 "-p",
                 "flow_control:=false",
                 "-p",
                 "wait_for_subscribers:=2",
+                "-p",
+                "barrier_nodes:=[sim_actuator, test_observer]",
             )
             total = plan.total_samples
             done = observer.spin_until(
                 lambda: (
                     len(observer.data[PITCH_STATE.name]) >= total
+                    and len(observer.data[PITCH_COMMAND.name]) >= total
                     and any(
                         json.loads(m.data).get("event") == "plan_end"
                         for _, m in observer.data[EXPERIMENT_SEGMENT.name]
@@ -58,7 +65,7 @@ def test_generator_drives_sim_actuator_every_sample_once(tmp_path: Path, monkeyp
                 ),
                 120,
             )
-            assert done, procs.log("generator") + procs.log("sim_actuator")
+            assert done, observer.counts() + procs.log("generator") + procs.log("sim_actuator")
             assert gen.poll() is None  # keeps the plan latched until stopped
     finally:
         observer.close()

@@ -4,9 +4,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from graph_support import Observer
+from graph_support import Observer, small_plan_design
 
-from multisine_gen.campaigns import short_plan
 from rig_runtime.interface import PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
 from rig_runtime.testing import Processes, graph_env, join_graph
 
@@ -17,10 +16,12 @@ TOPICS = {
 }
 
 
-def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -> None:
+def test_every_state_gets_one_coefficients_sample(
+    small_plan: Path, tmp_path: Path, monkeypatch
+) -> None:
     env = graph_env()
     join_graph(env, monkeypatch.setenv)
-    total = short_plan(seed=1).total_samples
+    total = small_plan_design().total_samples
     observer = Observer(TOPICS)
     try:
         with Processes(env, log_dir=tmp_path) as procs:
@@ -28,19 +29,24 @@ def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -
             procs.start_entry("wing_sim", "sim_wing", name="sim_wing")
             procs.start_entry("pressure_scanner", "lift", name="lift")
             assert observer.wait_matched(30), "nodes did not come up"
+            # Matched from the readers' side is not enough: Fast DDS drops what a reliable,
+            # volatile writer sends before its side has matched too. The observer joins the
+            # generator's start barrier with its own readiness report, as a graph node does
+            # (docs/design.md §3.5), so the first command waits for every link both ways.
+            observer.node.start_readiness()
             t0 = time.monotonic()
             procs.start_entry(
                 "multisine_gen",
                 "generator",
                 "--ros-args",
                 "-p",
-                "plan:=short",
-                "-p",
-                "seed:=1",
+                f"plan:={small_plan}",
                 "-p",
                 "real_time_factor:=0.0",
                 "-p",
                 "flow_control:=true",
+                "-p",
+                "barrier_nodes:=[sim_actuator, sim_wing, lift, test_observer]",
                 name="generator",
             )
             # Every observed stream complete: the big taps clouds may still be in the
@@ -50,7 +56,7 @@ def test_every_state_gets_one_coefficients_sample(tmp_path: Path, monkeypatch) -
             )
             wall = time.monotonic() - t0
             logs = "".join(procs.log(n) for n in ("generator", "sim_actuator", "sim_wing", "lift"))
-            assert done, logs
+            assert done, observer.counts() + logs
     finally:
         observer.close()
     states = observer.stamps(PITCH_STATE.name)[:total]
