@@ -1,4 +1,6 @@
-"""The whole campaign graph (short plan) as processes on DDS, the offline fit, and faults."""
+"""The whole campaign graph as processes on DDS, the offline fit, and faults: the short plan's
+identification; the small plan (conftest.small_plan) where a run must lose nothing and give
+the idle run's tables under load, on a mixed graph or after the identifier's kill."""
 
 import json
 import os
@@ -90,15 +92,33 @@ CORRUPTION_SIGNS = ("running on in real time", "time went backwards", "anomaly:"
 
 
 @pytest.fixture(scope="module")
-def starved_campaign(
-    tmp_path_factory: pytest.TempPathFactory,
+def small_campaign(
+    small_plan: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> tuple[Path, subprocess.CompletedProcess[str]]:
-    """The same campaign with two busy processes per core at the stream nodes' priority
+    """The small plan (conftest.small_plan: one level, 69 s of experiment) on the same wing,
+    idle: the reference of the runs below that must lose nothing and give the same tables
+    under load, on a mixed graph or after a fault (a third of the short campaign's time)."""
+    run = tmp_path_factory.mktemp("small") / "run"
+    proc = _aero_rig(
+        *("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet"),
+        *TIMEOUT_600,
+        env=graph_env(),
+        timeout=700,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return run, proc
+
+
+@pytest.fixture(scope="module")
+def starved_campaign(
+    small_plan: Path, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, subprocess.CompletedProcess[str]]:
+    """The small campaign with two busy processes per core at the stream nodes' priority
     (sim.yaml: nice 5) for the whole run: the first wave lost its first 1,000 samples so."""
     run = tmp_path_factory.mktemp("starved") / "run"
     with BusyProcesses(2 * (os.cpu_count() or 2), nice=5, limit_s=900):
         proc = _aero_rig(
-            *("campaign", "--plan", "short", *WING, "--out", str(run), "--quiet"),
+            *("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet"),
             *("--timeout", "800"),
             env=graph_env(),
             timeout=900,
@@ -267,11 +287,13 @@ def test_fit_of_bag_with_a_damaged_file_warns_and_fits(campaign, tmp_path: Path)
 
 
 @pytest.mark.timeout(900)  # the starved run shares two cores with four busy processes
-def test_starved_campaign_is_lossless_and_gives_the_same_table(campaign, starved_campaign) -> None:
+def test_starved_campaign_is_lossless_and_gives_the_same_table(
+    small_campaign, starved_campaign
+) -> None:
     run, proc = starved_campaign
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "data clean" in proc.stdout
-    _assert_lossless_and_identical(run, campaign[0])
+    _assert_lossless_and_identical(run, small_campaign[0])
 
 
 # A mixed graph (docs/design.md §3.1): the plant and the generator on the other backend than the
@@ -280,7 +302,9 @@ OTHER_BACKEND = {"rclpy": "dds", "dds": "rclpy"}
 MIXED_NODES = ("generator", "sim_actuator", "sim_wing")
 
 
-def test_mixed_graph_gives_the_same_tables(campaign, tmp_path: Path) -> None:
+def test_mixed_graph_gives_the_same_tables(
+    small_plan: Path, small_campaign, tmp_path: Path
+) -> None:
     """Half the nodes on rclpy (Fast DDS), half on the Cyclone DDS backend: lossless, and the
     tables and the data-quality account byte-identical to the one-backend campaign."""
     env = graph_env()
@@ -292,15 +316,15 @@ def test_mixed_graph_gives_the_same_tables(campaign, tmp_path: Path) -> None:
     run = tmp_path / "run"
     mixed = [f"--node-backend={name}={other}" for name in MIXED_NODES]
     proc = _aero_rig(
-        *("campaign", "--plan", "short", *WING, "--out", str(run), "--quiet", *mixed),
+        *("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet", *mixed),
         *TIMEOUT_600,
         env=env,
         timeout=700,
     )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    _assert_lossless_and_identical(run, campaign[0])
+    _assert_lossless_and_identical(run, small_campaign[0])
     for name in ("data_quality.md", "clustering.md"):
-        assert (run / name).read_bytes() == (campaign[0] / name).read_bytes(), name
+        assert (run / name).read_bytes() == (small_campaign[0] / name).read_bytes(), name
     for name in MIXED_NODES:  # each node ran where it was told
         assert f"on {other}" in (run / "logs" / f"{name}.log").read_text(), name
     # Fast DDS writers with Cyclone DDS readers: rmw_fastrtps's synchronous default, since
@@ -342,12 +366,12 @@ def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
 
 
 def _campaign_with_fault(
-    run: Path, log: str, text: str, node: str, fault: Any, *extra: str
+    run: Path, log: str, text: str, node: str, fault: Any, *extra: str, plan: str = "short"
 ) -> tuple[int, str, str]:
-    """The short campaign into ``run``; ``fault(process of node)`` once ``logs/<log>.log``
-    holds ``text``. Its exit code and output."""
+    """The campaign of ``plan`` into ``run``; ``fault(process of node)`` once
+    ``logs/<log>.log`` holds ``text``. Its exit code and output."""
     proc = start_session(
-        [*CLI, "campaign", "--plan", "short", *extra, "--out", str(run), "--quiet", *TIMEOUT_600],
+        [*CLI, "campaign", "--plan", plan, *extra, "--out", str(run), "--quiet", *TIMEOUT_600],
         graph_env(),
     )
     try:
@@ -428,18 +452,19 @@ def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_i
 
 @pytest.mark.timeout(600)
 def test_identifier_killed_in_its_final_identification_is_recovered_from_the_bag(
-    campaign, tmp_path: Path
+    small_plan: Path, small_campaign, tmp_path: Path
 ) -> None:
     """kill -9 of the identifier after the plan's end, once its final refit has started: the
     graph stops, the bag holds the whole plan, so the campaign runs the final identification
     from it: exit 0, Table 1 byte-identical to the idle run, the recovery and its reason said."""
     run = tmp_path / "run"
     code, out, err = _campaign_with_fault(
-        run, "identifier", "[final]", "identifier", lambda target: target.kill(), *WING
+        *(run, "identifier", "[final]", "identifier", lambda target: target.kill(), *WING),
+        plan=str(small_plan),
     )
     assert code == 0, out[-3000:] + err[-3000:]
     assert "node 'identifier' exited with code -9" in out + err
-    summary = _assert_recovered_as_idle(run, campaign[0], out)
+    summary = _assert_recovered_as_idle(run, small_campaign[0], out)
     assert summary["exit_codes"]["identifier"] == -9
 
 
