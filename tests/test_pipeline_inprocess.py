@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import math
+import socket
 from typing import Any
 
 import numpy as np
@@ -407,3 +408,47 @@ def test_estimation_bootstrap_refits_on_the_given_dask_client(campaign) -> None:
     assert serial.bootstrap is not None and on_dask.bootstrap is not None
     assert on_dask.bootstrap.spreads_all == serial.bootstrap.spreads_all
     assert on_dask.bootstrap.spreads_level1 == serial.bootstrap.spreads_level1
+
+
+def test_scan_scheduler_runs_the_scan_and_the_bootstrap_or_says_it_cannot_be_reached(
+    campaign, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """config.scan_scheduler (``aero-rig fit --scan-scheduler``): the scan's candidates and the
+    bootstrap's refits run as tasks of the Dask scheduler at that address (here a one-worker
+    cluster in this process, reached over loopback TCP) and give the serial run's tables. A
+    scheduler that cannot be reached costs the scan and the spreads, each named in a warning;
+    the identification still finishes with its linear models and Table 1."""
+    from dask.distributed import LocalCluster
+
+    asm = _assemble(campaign)
+    serial = identify(asm, BOOTSTRAP_CONFIG, final=True)
+    said: list[str] = []
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+        host="127.0.0.1", dashboard_address=None,
+    ) as cluster:  # fmt: skip
+        config = dataclasses.replace(BOOTSTRAP_CONFIG, scan_scheduler=cluster.scheduler_address)
+        remote = identify(asm, config, final=True, log=said.append)
+    line = next(m for m in said if m.startswith("Table 1 estimation bootstrap"))
+    assert "6 PNLSS refits (Dask client" in line, line
+    assert remote.scan is not None and serial.scan is not None
+    assert "Dask client" in remote.scan.workers, remote.scan.workers
+    timeless = [{k: v for k, v in r.items() if k != "fit_seconds"} for r in serial.scan.table]
+    assert [{k: v for k, v in r.items() if k != "fit_seconds"} for r in remote.scan.table] == (
+        timeless
+    )
+    assert remote.errors_all == serial.errors_all
+    assert remote.bootstrap is not None and serial.bootstrap is not None
+    assert remote.bootstrap.spreads_all == serial.bootstrap.spreads_all
+
+    with socket.socket() as closed:  # a port nothing listens on
+        closed.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{closed.getsockname()[1]}"
+    monkeypatch.setattr(pipeline, "SCHEDULER_CONNECT_S", 2.0)
+    config = dataclasses.replace(BOOTSTRAP_CONFIG, scan_scheduler=address)
+    lost = identify(asm, config, final=True)
+    failed = [w for w in lost.warnings if "failed" in w]
+    assert any(w.startswith("PNLSS structure scan failed") for w in failed), lost.warnings
+    assert any(w.startswith("Table 1 estimation bootstrap failed") for w in failed), lost.warnings
+    assert lost.scan is None and lost.bootstrap is None
+    assert lost.errors_all and lost.linear_level1 is not None

@@ -32,7 +32,8 @@ dropped), like the measured data.
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -496,9 +497,7 @@ def _scan(
     u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
     try:
         if client is None and config.scan_scheduler:
-            from dask.distributed import Client
-
-            with Client(config.scan_scheduler, timeout="30s") as remote:
+            with scheduler_client(config.scan_scheduler) as remote:
                 return _scan(levels, result, config, remote, say)
         linear = {
             n: (lin if n == lin.nx and 0 in config.scan_nx else
@@ -742,6 +741,20 @@ def _refit_job(
     return cand, lin, (data, validation), options
 
 
+SCHEDULER_CONNECT_S = 30.0  # how long a scan or bootstrap tries to reach scan_scheduler
+
+
+@contextmanager
+def scheduler_client(address: str) -> Iterator[Any]:
+    """A Dask client of the scheduler at ``address`` (identifier parameter
+    ``scan_scheduler``) for the scan's or the bootstrap's fits; OSError if it cannot be reached
+    within SCHEDULER_CONNECT_S."""
+    from dask.distributed import Client
+
+    with Client(address, timeout=f"{SCHEDULER_CONNECT_S:g}s") as remote:
+        yield remote
+
+
 def _run_refits(
     wanted: list[tuple[Candidate, LinearStateSpace, tuple[PeriodicData, PeriodicData], Any]],
     config: IdentificationConfig,
@@ -756,9 +769,7 @@ def _run_refits(
     jobs = [(cand, lin, k, options) for k, (cand, lin, _, options) in enumerate(wanted)]
     sets = [pair for _, _, pair, _ in wanted]
     if client is None and config.scan_scheduler:
-        from dask.distributed import Client
-
-        with Client(config.scan_scheduler, timeout="30s") as remote:
+        with scheduler_client(config.scan_scheduler) as remote:
             fits, where = run_fits(jobs, sets, remote)
     else:
         fits, where = run_fits(jobs, sets, client, workers=config.scan_workers or None)
@@ -819,7 +830,11 @@ def _estimation_bootstrap(
             if job is not None:
                 wanted.append(job)
                 slots.append((rep, slot))
-    models, where = _run_refits(wanted, config, client)
+    try:
+        models, where = _run_refits(wanted, config, client)
+    except OSError as exc:  # the Dask scheduler cannot be reached: Table 1 without spreads
+        result.warnings.append(f"Table 1 estimation bootstrap failed: {exc}")
+        return
     for (rep, slot), fitted in zip(slots, models, strict=True):
         setattr(rep, slot, fitted)
     replicates_all: list[dict[Cell, float]] = []
