@@ -58,6 +58,9 @@ def test_generator_drives_sim_actuator_every_sample_once(
                 lambda: (
                     len(observer.data[PITCH_STATE.name]) >= total
                     and len(observer.data[PITCH_COMMAND.name]) >= total
+                    # The plan is published at t0 with the first commands: one large message,
+                    # fragmented, which under load can arrive after the last command.
+                    and len(observer.data[EXPERIMENT_PLAN.name]) >= 1
                     and any(
                         json.loads(m.data).get("event") == "plan_end"
                         for _, m in observer.data[EXPERIMENT_SEGMENT.name]
