@@ -459,7 +459,12 @@ def test_identifier_killed_in_its_final_identification_is_recovered_from_the_bag
     from it: exit 0, Table 1 byte-identical to the idle run, the recovery and its reason said."""
     run = tmp_path / "run"
     code, out, err = _campaign_with_fault(
-        *(run, "identifier", "[final]", "identifier", lambda target: target.kill(), *WING),
+        run,
+        "identifier",
+        "[final]",
+        "identifier",
+        lambda target: target.kill(),
+        *WING,
         plan=str(small_plan),
     )
     assert code == 0, out[-3000:] + err[-3000:]

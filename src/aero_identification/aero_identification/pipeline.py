@@ -496,32 +496,30 @@ def _scan(
     degree_sets = [d for d in (tuple(x) for x in config.scan_degrees) if d in degree_sets]
     u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
     try:
-        if client is None and config.scan_scheduler:
-            with scheduler_client(config.scan_scheduler) as remote:
-                return _scan(levels, result, config, remote, say)
         linear = {
             n: (lin if n == lin.nx and 0 in config.scan_nx else
                 fit_linear_ss(low.bla, nx=n).with_operating_point(u0, y0))
             for n in orders
         }  # fmt: skip
         t0 = time.perf_counter()
-        scan = scan_pnlss(
-            data,
-            validation,
-            nx=tuple(orders),
-            degrees=tuple(degree_sets),
-            equations=equations,
-            structures=(config.structure,),
-            max_iter=config.scan_max_iter,
-            client=client,
-            linear=linear,
-            workers=config.scan_workers or None,
-            record_weights=_level_weights(data, config.level_weighting),
-            validation_weights=_level_weights(validation, config.level_weighting),
-            starts=("linear", "output_ls"),  # the latter: the single-structure fit's start
-            stress=config.scan_stress or None,
-            splits=splits,
-        )
+        with fit_client(config, client) as executor:
+            scan = scan_pnlss(
+                data,
+                validation,
+                nx=tuple(orders),
+                degrees=tuple(degree_sets),
+                equations=equations,
+                structures=(config.structure,),
+                max_iter=config.scan_max_iter,
+                client=executor,
+                linear=linear,
+                workers=config.scan_workers or None,
+                record_weights=_level_weights(data, config.level_weighting),
+                validation_weights=_level_weights(validation, config.level_weighting),
+                starts=("linear", "output_ls"),  # the latter: the single-structure fit's start
+                stress=config.scan_stress or None,
+                splits=splits,
+            )
         say(
             f"PNLSS structure scan: {len(scan.rows)} candidates × {1 + len(splits)} split(s), "
             f"{time.perf_counter() - t0:.1f} s"
@@ -745,13 +743,17 @@ SCHEDULER_CONNECT_S = 30.0  # how long a scan or bootstrap tries to reach scan_s
 
 
 @contextmanager
-def scheduler_client(address: str) -> Iterator[Any]:
-    """A Dask client of the scheduler at ``address`` (identifier parameter
-    ``scan_scheduler``) for the scan's or the bootstrap's fits; OSError if it cannot be reached
-    within SCHEDULER_CONNECT_S."""
+def fit_client(config: IdentificationConfig, client: Any) -> Iterator[Any]:
+    """The Dask client the scan's and the bootstrap's fits run on: identify's ``client``, else
+    one of the scheduler at ``config.scan_scheduler`` for the duration (OSError if it cannot be
+    reached within SCHEDULER_CONNECT_S), else None (scan.run_fits: ``scan_workers`` local
+    processes or this one)."""
+    if client is not None or not config.scan_scheduler:
+        yield client
+        return
     from dask.distributed import Client
 
-    with Client(address, timeout=f"{SCHEDULER_CONNECT_S:g}s") as remote:
+    with Client(config.scan_scheduler, timeout=f"{SCHEDULER_CONNECT_S:g}s") as remote:
         yield remote
 
 
@@ -768,11 +770,8 @@ def _run_refits(
         return [], "no refit"
     jobs = [(cand, lin, k, options) for k, (cand, lin, _, options) in enumerate(wanted)]
     sets = [pair for _, _, pair, _ in wanted]
-    if client is None and config.scan_scheduler:
-        with scheduler_client(config.scan_scheduler) as remote:
-            fits, where = run_fits(jobs, sets, remote)
-    else:
-        fits, where = run_fits(jobs, sets, client, workers=config.scan_workers or None)
+    with fit_client(config, client) as executor:
+        fits, where = run_fits(jobs, sets, executor, workers=config.scan_workers or None)
     return [model if row.status == "ok" else None for row, model in fits], where
 
 
