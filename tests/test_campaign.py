@@ -338,9 +338,7 @@ def test_mixed_graph_gives_the_same_tables(
 def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
     """SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run: the credit stalls the
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed.
-    On both backends: on rclpy the campaign publishes asynchronously (README, Known limits:
-    a publish failed after a pause in 2 of 4 CI runs on 2026-11-25, under synchronous
-    publication; not seen since in 7 runs, 3 of them with two busy processes)."""
+    On both backends (README, Known limits: what is known of pauses on rclpy)."""
     run = tmp_path / "run"
     proc = start_session(
         [*CLI, "campaign", "--plan", "short", *WING, "--out", str(run), "--quiet", *TIMEOUT_600],
