@@ -335,13 +335,25 @@ def test_mixed_graph_gives_the_same_tables(
 
 
 @pytest.mark.timeout(900)
-def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
+def test_nodes_paused_in_turn_lose_nothing(
+    small_plan: Path, small_campaign, tmp_path: Path
+) -> None:
     """SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run: the credit stalls the
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed.
     On both backends (README, Known limits: what is known of pauses on rclpy)."""
     run = tmp_path / "run"
     proc = start_session(
-        [*CLI, "campaign", "--plan", "short", *WING, "--out", str(run), "--quiet", *TIMEOUT_600],
+        [
+            *CLI,
+            "campaign",
+            "--plan",
+            str(small_plan),
+            *WING,
+            "--out",
+            str(run),
+            "--quiet",
+            *TIMEOUT_600,
+        ],
         graph_env(),
     )
     paused = []
@@ -358,7 +370,7 @@ def test_nodes_paused_in_turn_lose_nothing(campaign, tmp_path: Path) -> None:
         out, err = finish(proc, 600)
     assert len(paused) >= 4, f"the run ended before most pauses: {paused}"
     assert proc.returncode == 0, out[-3000:] + err[-3000:]
-    _assert_lossless_and_identical(run, campaign[0])
+    _assert_lossless_and_identical(run, small_campaign[0])
 
 
 def _campaign_with_fault(
