@@ -28,7 +28,8 @@ print("writer made")
 
 
 def _output_of_a_writer(profiles: Path) -> str:
-    env = graph_env(RIG_RUNTIME_BACKEND="rclpy", **{PROFILES_ENV: str(profiles)})
+    env = graph_env(RIG_RUNTIME_BACKEND="rclpy")
+    env[PROFILES_ENV] = str(profiles)
     proc = subprocess.run(
         [sys.executable, "-c", MAKE_A_WRITER],
         env=env,
