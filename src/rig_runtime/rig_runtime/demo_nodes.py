@@ -30,6 +30,7 @@ TALKER_PARAMETERS = [
     Parameter("count", 100, "messages to publish", min=1),
     Parameter("rate_hz", 0.0, "publish rate [Hz]; 0 = as fast as possible", min=0.0),
     Parameter("wait_for_subscribers", 1, "subscribers to wait for before publishing", min=0),
+    Parameter("start_delay_s", 0.0, "wait this long after the subscribers matched [s]", min=0.0),
     Parameter("exit_code", 0, "exit with this code once done (launcher tests)", min=0, max=255),
     Parameter("linger_s", 1.0, "keep running this long after the last message [s]", min=0.0),
 ]
@@ -86,6 +87,7 @@ class Talker:
         type_name = MESSAGE_TYPES[self.kind]
         self.pub = node.create_publisher(type_name, p["topic"], qos=p["qos"])
         self.sent = 0
+        self.matched_at: float | None = None
         self.done_at: float | None = None
         period = 1.0 / p["rate_hz"] if p["rate_hz"] > 0 else 0.001
         node.create_timer(period, self.tick)
@@ -96,7 +98,16 @@ class Talker:
             if time.monotonic() - self.done_at >= p["linger_s"]:
                 self.node.request_shutdown(p["exit_code"])
             return
-        if self.pub.subscription_count() < p["wait_for_subscribers"]:
+        if self.matched_at is None:
+            if self.pub.subscription_count() < p["wait_for_subscribers"]:
+                return
+            self.matched_at = time.monotonic()
+            self.node.logger.info(
+                "%d subscriber(s) matched; publishing in %g s",
+                self.pub.subscription_count(),
+                p["start_delay_s"],
+            )
+        if time.monotonic() - self.matched_at < p["start_delay_s"]:
             return
         burst = 1 if p["rate_hz"] > 0 else 500
         for _ in range(burst):

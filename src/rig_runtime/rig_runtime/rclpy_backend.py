@@ -39,6 +39,11 @@ from .qos import QosProfile
 from .ros_environment import INSTALL_RCLPY, domain_id
 
 EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
+# When a node closes, its reliable writers wait this long for their readers to acknowledge what
+# they hold, as Cyclone DDS's writer linger (1 s) does on the DDS backend (dds_backend.close).
+# Fast DDS deletes a writer at once: a reader that lost the end of a burst (a full receive
+# queue, a paused process) gets its repair from the writer only, so it lost that end for good.
+WRITER_LINGER_S = 1.0
 # Fast DDS reads its default QoS profiles from this file when the first participant is made.
 PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
 PROFILES_FILE = Path(__file__).with_name("fastdds_profiles.xml")
@@ -454,7 +459,32 @@ class RclpyBackend:
                 result[name] = (types[0], profile)
         return result
 
+    def _linger(self) -> list[str]:
+        """Wait (WRITER_LINGER_S in all) until every reliable writer's samples are
+        acknowledged; the topics of those whose samples were not."""
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + WRITER_LINGER_S
+        late = []
+        for pub in self._publishers:
+            if pub.profile.reliability != "reliable":
+                continue
+            remaining = max(deadline - time.monotonic(), 0.0)
+            try:
+                acked = pub.publisher.wait_for_all_acked(Duration(nanoseconds=int(remaining * 1e9)))
+            except Exception:  # rclpy's RCLError: the writer cannot say
+                acked = False
+            if not acked:
+                late.append(pub.topic)
+        return late
+
     def close(self) -> None:
+        late = self._linger()
+        if late:
+            self.node.get_logger().warning(
+                f"closing with samples not acknowledged after {WRITER_LINGER_S:g} s on "
+                f"{', '.join(sorted(set(late)))}: a reader is paused, starved or gone"
+            )
         self._executor.remove_node(self.node)
         self._executor.shutdown()
         self.node.destroy_node()

@@ -1,7 +1,7 @@
 """The rclpy backend's Fast DDS profile file (rig_runtime/fastdds_profiles.xml) is one that Fast
 DDS accepts. Fast DDS ignores a file it cannot parse, whole, with one error line on stdout (its
 default log consumer) and nothing else: the writers would then fall back to Fast DDS's 100 ms
-max_blocking_time without any sign in the graph."""
+max_blocking_time and 3 s heartbeat period without any sign in the graph."""
 
 import subprocess
 import sys
@@ -44,6 +44,7 @@ def _output_of_a_writer(profiles: Path) -> str:
 def test_fast_dds_parses_the_profile_file() -> None:
     text = PROFILES_FILE.read_text()
     assert "<max_blocking_time><sec>60</sec></max_blocking_time>" in text
+    assert "<heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod>" in text
     assert "XMLPARSER" not in _output_of_a_writer(PROFILES_FILE)
 
 

@@ -43,6 +43,43 @@ def test_10000_reliable_messages_none_lost_in_order(tmp_path: Path) -> None:
     assert summary["last"] == 9999
 
 
+def test_a_writer_leaving_at_once_still_delivers_to_a_paused_reader(tmp_path: Path) -> None:
+    """The listener is stopped (SIGSTOP) while the talker publishes 3,000 messages (fewer than
+    the 5,000 a keep-all writer holds unacknowledged before it blocks) and exits at once
+    (linger_s 0): most of the burst overflows the stopped reader's receive queue. The
+    talker's writer waits for its reader's acknowledgement when its node closes (rclpy:
+    WRITER_LINGER_S and Fast DDS heartbeats every 100 ms; DDS backend: Cyclone's writer
+    linger), so the listener, resumed within that time, still gets every message in order."""
+    import psutil
+
+    result = tmp_path / "listener.json"
+    with Processes(graph_env(), log_dir=tmp_path) as procs:
+        listener = procs.start_entry(
+            "rig_runtime", "listener", *_listener_args(result, count=3000, qos="stream")
+        )
+        talker = procs.start_entry(
+            "rig_runtime",
+            "talker",
+            *_talker_args(count=3000, qos="stream", linger_s=0.0, start_delay_s=0.3),
+        )
+        talker_log = tmp_path / "talker.log"
+        assert wait_for(lambda: "matched; publishing" in talker_log.read_text(), 60), procs.log(
+            "talker"
+        )
+        stopped = psutil.Process(listener.pid)
+        stopped.suspend()
+        try:
+            # resumed once the talker has published all and is closing (its linger runs)
+            assert wait_for(lambda: "published 3000" in talker_log.read_text(), 30)
+        finally:
+            stopped.resume()
+        assert wait_for(lambda: listener.poll() is not None, 30), procs.log("listener")
+        assert wait_for(lambda: talker.poll() is not None, 30), procs.log("talker")
+    summary = json.loads(result.read_text())
+    assert summary["received"] == 3000, summary
+    assert summary["out_of_order"] == 0 and summary["last"] == 2999, summary
+
+
 def test_latched_topic_reaches_late_subscriber(tmp_path: Path) -> None:
     result = tmp_path / "late.json"
     with Processes(graph_env(), log_dir=tmp_path) as procs:
