@@ -342,20 +342,8 @@ def test_nodes_paused_in_turn_lose_nothing(
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed.
     On both backends (README, Known limits: what is known of pauses on rclpy)."""
     run = tmp_path / "run"
-    proc = start_session(
-        [
-            *CLI,
-            "campaign",
-            "--plan",
-            str(small_plan),
-            *WING,
-            "--out",
-            str(run),
-            "--quiet",
-            *TIMEOUT_600,
-        ],
-        graph_env(),
-    )
+    args = ("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet")
+    proc = start_session([*CLI, *args, *TIMEOUT_600], graph_env())
     paused = []
     try:
         log = run / "logs" / "generator.log"

@@ -62,15 +62,14 @@ def test_a_writer_leaving_at_once_still_delivers_to_a_paused_reader(tmp_path: Pa
             "talker",
             *_talker_args(count=3000, qos="stream", linger_s=0.0, start_delay_s=0.3),
         )
-        talker_log = tmp_path / "talker.log"
-        assert wait_for(lambda: "matched; publishing" in talker_log.read_text(), 60), procs.log(
+        assert wait_for(lambda: "matched; publishing" in procs.log("talker"), 60), procs.log(
             "talker"
         )
         stopped = psutil.Process(listener.pid)
         stopped.suspend()
         try:
             # resumed once the talker has published all and is closing (its linger runs)
-            assert wait_for(lambda: "published 3000" in talker_log.read_text(), 30)
+            assert wait_for(lambda: "published 3000" in procs.log("talker"), 30)
         finally:
             stopped.resume()
         assert wait_for(lambda: listener.poll() is not None, 30), procs.log("listener")
