@@ -37,6 +37,13 @@ def campaign() -> tuple[ExperimentPlan, np.ndarray, np.ndarray, np.ndarray]:
     return run.plan, run.stamps_ns, run.pitch_deg, run.cl
 
 
+# The final identification for the tests of the data-quality account and of the identifier's
+# worker: what they check does not depend on the models, so no structure scan and no
+# clustering ablation (both tested below and in every campaign); a few LM iterations.
+ACCOUNT_CONFIG = IdentificationConfig(max_iter=2, scan=False, clustering_ablation=False)
+NO_SCAN = ("-p", "scan:=false", "-p", "clustering_ablation:=false")  # the same, as node parameters
+
+
 def _assemble(campaign, drop: int | None = None, duplicate: int | None = None) -> CampaignAssembler:
     plan, stamps, u, y = campaign
     asm = CampaignAssembler(plan, T0)
@@ -100,7 +107,7 @@ def test_a_sine_still_streaming_is_no_warning_until_the_final_refit(campaign) ->
     asm = CampaignAssembler(plan, T0)
     asm.add_many("u", stamps[:half], u[:half])
     asm.add_many("y", stamps[:half], y[:half])
-    config = IdentificationConfig(max_iter=2)
+    config = ACCOUNT_CONFIG
     interim = identify(asm, config)
     assert not any("not used for validation" in w for w in interim.warnings), interim.warnings
     final = identify(asm, config, final=True, models_from=interim)
@@ -122,7 +129,7 @@ def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> No
     seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 2)
     sine = next(s for s in plan.segments if s.kind == "sine")
     asm = _assemble(campaign)
-    clean = identify(asm, IdentificationConfig(max_iter=2), final=True)
+    clean = identify(asm, ACCOUNT_CONFIG, final=True)
     assert clean.data_quality["clean"]
     assert clean.tables()["table1_all_levels"][0].startswith("| model")
     stamp = lambda k: T0 + round(k * 1e9 / plan.fs)  # noqa: E731
@@ -136,7 +143,7 @@ def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> No
     assert "sim_actuator free_run" in block.period_problem(2)
     later = [r for r in asm.sines.values() if r.mark]
     assert later and all(r.mark == "lift invalid" for r in later)
-    result = identify(asm, IdentificationConfig(max_iter=2), final=True)
+    result = identify(asm, ACCOUNT_CONFIG, final=True)
     quality = result.data_quality
     assert not quality["clean"] and len(quality["anomalies"]) == 2
     assert any("period 2" in p and "free_run" in p for p in quality["excluded_periods"])
@@ -157,7 +164,7 @@ def test_a_sample_delivered_twice_excludes_nothing(campaign) -> None:
     asm.add("y", int(stamps[k]), float(y[k]))  # a transport redelivery: identical
     asm.add("u", int(stamps[k]), float(u[k]))
     assert asm.blocks[(seg.level, seg.realization)].period_valid().all()
-    result = identify(asm, IdentificationConfig(max_iter=2), final=True)
+    result = identify(asm, ACCOUNT_CONFIG, final=True)
     assert result.data_quality["clean"]
     assert result.data_quality["samples"]["C_l"]["redelivered"] == 1
 
@@ -229,7 +236,9 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     from rig_runtime.testing import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
-    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3"], backend="dds")
+    node = Node(
+        "identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3", *NO_SCAN], backend="dds"
+    )
     ident = Identifier(node)
     try:
         ident.assembler = _assemble(campaign)
@@ -272,7 +281,7 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
     from rig_runtime.testing import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
-    args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false"]
+    args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false", *NO_SCAN]
     node = Node("identifier", PARAMETERS, args, backend="dds")
     ident = Identifier(node)
     try:
