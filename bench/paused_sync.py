@@ -21,43 +21,20 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from graph_support import small_plan_design
+from graph_support import CAMPAIGN_NODES, campaign_paused_in_turn, small_plan_design
 
 from multisine_gen.plan_format import plan_to_json
-from rig_runtime.testing import (
-    finish,
-    graph_env,
-    node_process,
-    pause,
-    start_session,
-    wait_for,
-)
-
-NODES = ("generator", "sim_actuator", "sim_wing", "lift", "identifier", "recorder")
-PAUSE_S = 3.0
+from rig_runtime.testing import graph_env
 
 
 def paused_run(plan: Path, run: Path) -> tuple[int, float, list[str], str]:
-    """One small campaign into ``run`` with each node paused in turn: (exit code, wall time,
-    the nodes paused, the campaign's stall line or '')."""
-    args = [sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", str(plan)]
-    args += ["-p", "sim_wing.preset:=repeatable_stall", "--out", str(run), "--quiet"]
+    """One small campaign into ``run`` with each node paused 3 s in turn: (exit code, wall
+    time, the nodes paused, the campaign's stall line or '')."""
+    args = ("--plan", str(plan), "-p", "sim_wing.preset:=repeatable_stall", "--quiet")
     start = time.monotonic()
-    proc = start_session([*args, "--timeout", "600"], graph_env())
-    paused: list[str] = []
-    try:
-        log = run / "logs" / "generator.log"
-        wait_for(lambda: log.exists() and "start barrier passed" in log.read_text(), 120)
-        for node in NODES:
-            target = node_process(proc.pid, node)
-            if target is None or proc.poll() is not None:
-                break
-            pause(target, PAUSE_S)
-            paused.append(node)
-    finally:
-        _, err = finish(proc, 600)
+    code, _, err, paused = campaign_paused_in_turn([*args, "--timeout", "600"], run, graph_env())
     stall = next((line for line in err.splitlines() if "stream stalled" in line), "")
-    return proc.returncode, time.monotonic() - start, paused, stall
+    return code, time.monotonic() - start, paused, stall
 
 
 def main() -> None:
@@ -74,7 +51,8 @@ def main() -> None:
         for i in range(ns.runs):
             code, wall, paused, stall = paused_run(plan, base / f"run{i}")
             codes.append(code)
-            print(f"run {i}: exit {code}, {wall:.0f} s, paused {len(paused)} nodes {stall}")
+            n = f"{len(paused)} of {len(CAMPAIGN_NODES)}"
+            print(f"run {i}: exit {code}, {wall:.0f} s, paused {n} nodes {stall}")
     failed = sum(code != 0 for code in codes)
     print(json.dumps({"runs": len(codes), "failed": failed, "exit_codes": codes}))
 

@@ -1,6 +1,9 @@
 """Shared pieces of the graph tests: an in-process observer node that collects topics."""
 
+import sys
 from collections import defaultdict
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -11,6 +14,7 @@ from rig_runtime.barrier import ReadinessReport
 from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import Node, Subscription
+from rig_runtime.testing import finish, node_process, pause, start_session, wait_for
 
 
 class Observer:
@@ -142,3 +146,30 @@ def small_plan_design() -> ExperimentPlan:
         seed=0,
         limits=None,
     )
+
+
+# The campaign's processes in the order they are paused (campaign_paused_in_turn).
+CAMPAIGN_NODES = ("generator", "sim_actuator", "sim_wing", "lift", "identifier", "recorder")
+
+
+def campaign_paused_in_turn(
+    args: Sequence[str], run: Path, env: dict[str, str], seconds: float = 3.0
+) -> tuple[int, str, str, list[str]]:
+    """``aero-rig campaign *args --out run``, each of its nodes SIGSTOPped for ``seconds`` in
+    turn once the start barrier has passed, until the run ends. Its exit code, stdout, stderr
+    and the nodes paused (tests/test_campaign.py's paused-in-turn test, bench/paused_sync.py)."""
+    cli = [sys.executable, "-m", "aero_rig.cli", "campaign", *args, "--out", str(run)]
+    proc = start_session(cli, env)
+    paused: list[str] = []
+    try:
+        log = run / "logs" / "generator.log"
+        assert wait_for(lambda: log.exists() and "start barrier passed" in log.read_text(), 120)
+        for node in CAMPAIGN_NODES:
+            target = node_process(proc.pid, node)
+            if target is None or proc.poll() is not None:
+                break
+            pause(target, seconds)
+            paused.append(node)
+    finally:
+        out, err = finish(proc, 600)
+    return proc.returncode, out, err, paused

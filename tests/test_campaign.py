@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from graph_support import campaign_paused_in_turn
 from rosbags.highlevel import AnyReader
 
 from aero_rig.verdict import STREAM_TOPICS
@@ -343,22 +344,10 @@ def test_nodes_paused_in_turn_lose_nothing(
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed.
     On both backends (README, Known limits: what is known of pauses on rclpy)."""
     run = tmp_path / "run"
-    args = ("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet")
-    proc = start_session([*CLI, *args, *TIMEOUT_600], graph_env())
-    paused = []
-    try:
-        log = run / "logs" / "generator.log"
-        assert wait_for(lambda: log.exists() and "start barrier passed" in log.read_text(), 120)
-        for node in ("generator", "sim_actuator", "sim_wing", "lift", "identifier", "recorder"):
-            target = node_process(proc.pid, node)
-            if target is None or proc.poll() is not None:
-                break
-            pause(target, 3.0)
-            paused.append(node)
-    finally:
-        out, err = finish(proc, 600)
+    args = ("--plan", str(small_plan), *WING, "--quiet", *TIMEOUT_600)
+    code, out, err, paused = campaign_paused_in_turn(args, run, graph_env())
     assert len(paused) >= 4, f"the run ended before most pauses: {paused}"
-    assert proc.returncode == 0, out[-3000:] + err[-3000:]
+    assert code == 0, out[-3000:] + err[-3000:]
     _assert_lossless_and_identical(run, small_campaign[0])
 
 
