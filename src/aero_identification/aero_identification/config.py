@@ -103,14 +103,16 @@ class IdentificationConfig:
     # How the levels weigh in the all-levels PNLSS cost and in the choice of its iterate:
     # "none": absolute errors (the largest level dominates); "relative": each level's record
     # by 1 / var(its output), the sum of the levels' squared relative errors that Table 1
-    # reports. Chosen by cross-validation (bench/level_weighting.py; README, "PNLSS against the
-    # BLA"): on three plant seeds' default campaigns neither weighting has the lower held-out
-    # error on every seed (RMS over the levels: 0.215/0.292/0.163 none, 0.228/0.279/0.165
-    # relative), so the default stays "none".
+    # reports; "noise": by 1 / the noise variance of its mean period (the scatter of its kept
+    # periods, stall cycle-to-cycle variation included): maximum likelihood under level-
+    # dependent noise. Chosen by cross-validation (bench/level_weighting.py; README, "PNLSS
+    # against the BLA"): RMS over the levels of the held-out realizations' relative errors on
+    # three plant seeds' default campaigns 0.215/0.292/0.163 none, 0.228/0.279/0.165 relative,
+    # 0.328/0.580/0.226 noise (best at low and medium, worst at high), so "none" stays.
     level_weighting: str = hyper(
         "none",
         "weights of the levels in the all-levels PNLSS cost",
-        choices=("none", "relative"),
+        choices=("none", "relative", "noise"),
     )
     # Cross-validated structure scan (scan.py) for the final all-levels PNLSS instead of the
     # one structure above: every (nx, degrees, equations) of the grid is fitted from the

@@ -418,10 +418,9 @@ def _fit(
             "'statesonly', or a lower order"
         )
         return None
-    weights = _level_weights(data, config.level_weighting)
-    val_weights = _level_weights(validation, config.level_weighting) if validation else None
     t0 = time.perf_counter()
     try:
+        weights, val_weights = _set_weights(levels, config, data, validation)
         start = output_equation_start(
             data, lin, degrees=config.degrees, structure=config.structure, validation=validation,
             record_weights=weights, validation_weights=val_weights,
@@ -501,6 +500,7 @@ def _scan(
                 fit_linear_ss(low.bla, nx=n).with_operating_point(u0, y0))
             for n in orders
         }  # fmt: skip
+        weights, val_weights = _set_weights(levels, config, data, validation)
         t0 = time.perf_counter()
         with fit_client(config, client) as executor:
             scan = scan_pnlss(
@@ -514,8 +514,8 @@ def _scan(
                 client=executor,
                 linear=linear,
                 workers=config.scan_workers or None,
-                record_weights=_level_weights(data, config.level_weighting),
-                validation_weights=_level_weights(validation, config.level_weighting),
+                record_weights=weights,
+                validation_weights=val_weights,
                 starts=("linear", "output_ls"),  # the latter: the single-structure fit's start
                 stress=config.scan_stress or None,
                 splits=splits,
@@ -531,15 +531,72 @@ def _scan(
 
 
 def _level_weights(data: PeriodicData, weighting: str) -> np.ndarray | None:
-    """Per-record weights of a one-record-per-level set (config.level_weighting)."""
-    if weighting == "none":
+    """Per-record weights of a one-record-per-level set (config.level_weighting "relative")."""
+    if weighting in ("none", "noise"):  # "noise": `_set_weights`, which knows the levels
         return None
     if weighting != "relative":
-        raise ValueError(f"level_weighting must be 'relative' or 'none'; got {weighting!r}")
+        raise ValueError(
+            f"level_weighting must be 'none', 'relative' or 'noise'; got {weighting!r}"
+        )
     var = np.var(data.y, axis=0).T.reshape(-1)  # record r = m·P + p
     if not np.all(var > 0):
         raise ValueError("a level's output is constant: relative weighting is undefined")
     return 1.0 / var
+
+
+def noise_variance(res: LevelResult) -> float:
+    """Noise variance of the level's mean period: the sample variance over the kept periods
+    of each realization (ddof 1), averaged over time, divided by the periods averaged, then
+    averaged over the realizations (the sample variance of the mean over
+    P periods is σ²/P). The stall's cycle-to-cycle scatter counts as noise here: no periodic
+    model can predict it."""
+    data = res.record.data
+    assert data is not None
+    per_realization = []
+    for m in range(data.M):
+        cols = _kept(res, m)
+        if len(cols) >= 2:
+            var = np.var(data.y[:, cols, m], axis=1, ddof=1).mean()
+            per_realization.append(var / len(cols))
+    if not per_realization:
+        raise ValueError(
+            f"level {res.record.name}: level_weighting 'noise' needs two kept periods of a "
+            "realization to estimate the noise; use 'none' or 'relative'"
+        )
+    var = float(np.mean(per_realization))
+    if not var > 0:
+        raise ValueError(f"level {res.record.name}: the output repeats exactly, noise variance 0")
+    return var
+
+
+def _set_weights(
+    levels: Sequence[LevelResult],
+    config: IdentificationConfig,
+    data: PeriodicData,
+    validation: PeriodicData | None,
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Record weights of `pnlss_sets`' training and held-out sets (config.level_weighting).
+
+    "noise": each level's records by 1 / the noise variance of its mean period
+    (`noise_variance`), the weighted least squares that is the maximum-likelihood output-error
+    estimator under Gaussian noise of level-dependent variance [Pintelon2012]
+    [Paduart2010: the PNLSS cost weighted by the inverse noise variance]. The records follow
+    `pnlss_sets`' order: per level, its training realizations (or its one training mean)."""
+    if config.level_weighting != "noise":
+        return (
+            _level_weights(data, config.level_weighting),
+            _level_weights(validation, config.level_weighting) if validation else None,
+        )
+    w = np.array([1.0 / noise_variance(res) for res in levels])
+    counts = []
+    for res in levels:
+        d = res.record.data
+        assert d is not None
+        counts.append(d.M - 1 if validation_realization(d, config) is not None else 1)
+    train = np.repeat(w, counts)
+    if train.size != data.y.shape[2]:  # pnlss_sets' record order changed: fail loudly
+        raise ValueError(f"noise weighting: {train.size} weights for {data.y.shape[2]} records")
+    return train, (w if validation is not None else None)
 
 
 def _signature(res: LevelResult, config: IdentificationConfig) -> bytes:
@@ -730,10 +787,11 @@ def _refit_job(
     if cand.nx != lin.nx:
         u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
         lin = fit_linear_ss(low.bla, nx=cand.nx).with_operating_point(u0, y0)
+    weights, val_weights = _set_weights(levels, config, data, validation)
     options = {
         "max_iter": max_iter,
-        "record_weights": _level_weights(data, config.level_weighting),
-        "validation_weights": _level_weights(validation, config.level_weighting),
+        "record_weights": weights,
+        "validation_weights": val_weights,
         "stress": stress,
     }
     return cand, lin, (data, validation), options
