@@ -5,10 +5,11 @@ import dataclasses
 import numpy as np
 import pytest
 
+from aero_identification import pipeline
 from aero_identification.config import IdentificationConfig
-from aero_identification.data import PeriodicData
-from aero_identification.dataset import LevelRecord
-from aero_identification.pipeline import _set_weights, noise_variance, pnlss_sets
+from aero_identification.data import PeriodicData, random_phase_period
+from aero_identification.dataset import Dataset, LevelRecord
+from aero_identification.pipeline import _set_weights, identify, noise_variance, pnlss_sets
 from aero_identification.results import LevelResult
 
 N, P, M = 64, 5, 3
@@ -63,3 +64,56 @@ def test_noise_weighting_needs_two_periods() -> None:
     res = _level("medium", 0.1, seed=6, periods=1)
     with pytest.raises(ValueError, match="level medium: level_weighting 'noise' needs two"):
         noise_variance(res)
+
+
+def _dataset(noise_std: tuple[float, float]) -> Dataset:
+    """Two levels of a first-order system with a quadratic output term, driven by odd
+    random-phase multisines (N 256, 4 periods, 3 realizations), each with its own noise."""
+    rng = np.random.default_rng(7)
+    n, p, m = 256, 4, 3
+    lines = np.arange(1, 40, 2)
+    levels = []
+    for k, (offset, std) in enumerate(zip((2.0, 6.0), noise_std, strict=True)):
+        u = np.empty((n, p, m))
+        y = np.empty((n, p, m))
+        for r in range(m):
+            period = offset + random_phase_period(rng, n, lines) / 0.1
+            x = 0.0
+            for _ in range(3):  # steady state: the last period of three
+                xs = np.empty(n)
+                for t in range(n):
+                    xs[t] = x
+                    x = 0.8 * x + 0.2 * period[t]
+            u[:, :, r] = period[:, None]
+            y[:, :, r] = (xs + 0.05 * xs**2)[:, None] + std * rng.standard_normal((n, p))
+        levels.append(LevelRecord(str(k + 1), PeriodicData(u, y, 10.0, lines), offset_deg=offset))
+    return Dataset(fs=10.0, levels=levels)
+
+
+@pytest.mark.parametrize("scan", [False, True])
+def test_identify_passes_noise_weights_to_the_fit(
+    scan: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The all-levels fit (single structure or scan) gets 1 / each level's noise variance:
+    the quiet level's records outweigh the noisy one's by their variance ratio."""
+    seen: list[dict[str, object]] = []
+
+    def capture(*_args: object, **kwargs: object) -> None:
+        seen.append(kwargs)
+        raise ValueError("captured")  # the pipeline reports it and goes on
+
+    monkeypatch.setattr(pipeline, "scan_pnlss" if scan else "fit_pnlss", capture)
+    config = dataclasses.replace(
+        IdentificationConfig(), level_weighting="noise", scan=scan, clustering=False,
+        clustering_ablation=False, scan_nx=(1,), scan_degrees=((2,),), max_iter=2,
+    )  # fmt: skip
+    result = identify(_dataset((0.01, 0.1)), config, final=True)
+    assert any("captured" in w for w in result.warnings)
+    weights = [s for s in seen if s["record_weights"] is not None and len(s["record_weights"]) > 2]  # type: ignore[arg-type]
+    assert weights, "the all-levels fit got no per-level weights"
+    train = np.asarray(weights[-1]["record_weights"])
+    held = np.asarray(weights[-1]["validation_weights"])
+    expected = [1 / noise_variance(res) for res in result.levels.values()]
+    np.testing.assert_allclose(train, np.repeat(expected, 2))  # M - 1 = 2 realizations each
+    np.testing.assert_allclose(held, expected)
+    assert train[0] / train[-1] == pytest.approx(100, rel=0.3)  # (0.1 / 0.01)²
