@@ -546,10 +546,9 @@ def _level_weights(data: PeriodicData, weighting: str) -> np.ndarray | None:
 
 def noise_variance(res: LevelResult) -> float:
     """Noise variance of the level's mean period: the sample variance over the kept periods
-    of each realization (ddof 1), averaged over time, divided by the periods averaged, then
-    averaged over the realizations (the sample variance of the mean over
-    P periods is σ²/P). The stall's cycle-to-cycle scatter counts as noise here: no periodic
-    model can predict it."""
+    of each realization (ddof 1), averaged over time and divided by the number of periods
+    averaged (the mean of P periods has variance σ²/P), then averaged over the realizations.
+    The stall's cycle-to-cycle scatter counts as noise here: no periodic model predicts it."""
     data = res.record.data
     assert data is not None
     per_realization = []
