@@ -530,15 +530,9 @@ def _scan(
         return None
 
 
-def _level_weights(data: PeriodicData, weighting: str) -> np.ndarray | None:
-    """Per-record weights of a one-record-per-level set (config.level_weighting "relative")."""
-    if weighting in ("none", "noise"):  # "noise": `_set_weights`, which knows the levels
-        return None
-    if weighting != "relative":
-        raise ValueError(
-            f"level_weighting must be 'none', 'relative' or 'noise'; got {weighting!r}"
-        )
-    var = np.var(data.y, axis=0).T.reshape(-1)  # record r = m·P + p
+def _relative_weights(data: PeriodicData) -> np.ndarray:
+    """1 / var(each record's output) (level_weighting "relative"); record r = m·P + p."""
+    var = np.var(data.y, axis=0).T.reshape(-1)
     if not np.all(var > 0):
         raise ValueError("a level's output is constant: relative weighting is undefined")
     return 1.0 / var
@@ -581,10 +575,14 @@ def _set_weights(
     estimator under Gaussian noise of level-dependent variance [Pintelon2012]
     [Paduart2010: the PNLSS cost weighted by the inverse noise variance]. The records follow
     `pnlss_sets`' order: per level, its training realizations (or its one training mean)."""
-    if config.level_weighting != "noise":
-        return (
-            _level_weights(data, config.level_weighting),
-            _level_weights(validation, config.level_weighting) if validation else None,
+    weighting = config.level_weighting
+    if weighting == "none":
+        return None, None
+    if weighting == "relative":
+        return _relative_weights(data), (_relative_weights(validation) if validation else None)
+    if weighting != "noise":
+        raise ValueError(
+            f"level_weighting must be 'none', 'relative' or 'noise'; got {weighting!r}"
         )
     w = np.array([1.0 / noise_variance(res) for res in levels])
     counts = []
