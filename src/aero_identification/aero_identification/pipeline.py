@@ -843,10 +843,20 @@ def _estimation_bootstrap(
     the all-levels and level-1 PNLSS refitted with the estimate's structures, and Table 1
     scored; each cell's spread is the std over the replicates (fixed seed: reproducible).
     The replicates are drawn and their linear models fitted here, in order; their PNLSS refits,
-    the cost, are independent fits and run on the scan's executor (`_run_refits`)."""
+    the cost, are independent fits and run on the scan's executor (`_run_refits`). With
+    ``config.bootstrap_scan`` and a scanned estimate, each replicate's all-levels PNLSS comes
+    from its own structure scan instead (`_scan`, one after another, each on the executor), so
+    that the spread includes the selection (Efron 2014, see config.py)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     every, level1 = _refit_candidates(result, config)
+    rescan = config.bootstrap_scan and result.scan is not None
+    structures: list[str] = []  # what each replicate's scan kept (rescan)
+    if config.bootstrap_scan and not rescan:
+        result.warnings.append(
+            "bootstrap_scan: the all-levels PNLSS was not chosen by a structure scan (scan off "
+            "or failed), so the replicates refit its one structure"
+        )
     # One structure for both tables: the level-1 PNLSS is the all-levels one, not refitted.
     same = level1 is not None and result.pnlss_level1 is result.pnlss_all and every == level1
     quiet: Log = lambda _m: None  # noqa: E731
@@ -875,9 +885,18 @@ def _estimation_bootstrap(
         ready = [r for r in estimation if r.bla is not None and r.linear is not None]
         rep.linear_level1 = estimation[0].linear if estimation else None
         if not ready or ready[0] is not estimation[0]:
+            if rescan:
+                structures.append("")
             continue
+        if rescan:
+            scan = _scan(ready, rep, config, client, quiet)
+            rep.pnlss_all = None if scan is None else scan.best
+            structures.append("" if scan is None else scan.best_row.structure_label)
+            result.warnings.extend(
+                f"bootstrap replicate {len(replicates)}: {w}" for w in rep.warnings
+            )
         for how, levels, slot in (
-            (every, ready, "pnlss_all"),
+            (None if rescan else every, ready, "pnlss_all"),
             (None if same else level1, ready[:1], "pnlss_level1"),
         ):
             job = None if how is None else _refit_job(levels, how, config)
@@ -908,6 +927,8 @@ def _estimation_bootstrap(
         failed_all=failed_all,
         failed_level1=failed_level1,
         seconds=time.perf_counter() - t0,
+        kept_structure=result.scan.best_row.structure_label if rescan and result.scan else "",
+        replicate_structures=structures,
     )
     for table, failed in (("all levels", failed_all), ("level 1", failed_level1)):
         for (model, level, f), n in failed.items():
@@ -918,9 +939,15 @@ def _estimation_bootstrap(
                     f"{config.bootstrap} replicates (its estimation spread is over the rest)"
                 )
     result.timings_s["bootstrap"] = result.bootstrap.seconds
+    scans = (
+        f", {len(structures)} structure scans (the estimate's structure kept in "
+        f"{result.bootstrap.same_structure})"
+        if rescan
+        else ""
+    )
     say(
-        f"Table 1 estimation bootstrap: {config.bootstrap} replicates, {len(wanted)} PNLSS "
-        f"refits ({where}), {result.bootstrap.seconds:.1f} s"
+        f"Table 1 estimation bootstrap: {config.bootstrap} replicates{scans}, {len(wanted)} "
+        f"PNLSS refits ({where}), {result.bootstrap.seconds:.1f} s"
     )
 
 

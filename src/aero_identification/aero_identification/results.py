@@ -56,13 +56,32 @@ class EstimationSpread:
     failed_all: dict[tuple[str, str, float], int] = field(default_factory=dict)
     failed_level1: dict[tuple[str, str, float], int] = field(default_factory=dict)
     seconds: float = 0.0
+    # config.bootstrap_scan: the structure the estimate's scan kept and the one each
+    # replicate's scan kept ("" where it failed), by `structure_label`; empty: not rescanned.
+    kept_structure: str = ""
+    replicate_structures: list[str] = field(default_factory=list)
+
+    @property
+    def rescanned(self) -> bool:
+        return bool(self.replicate_structures)
+
+    @property
+    def same_structure(self) -> int:
+        """Replicates whose scan kept the estimate's structure."""
+        return sum(s == self.kept_structure for s in self.replicate_structures)
 
     @property
     def note(self) -> str:
         """What the Markdown tables' second ± is (a line above each table)."""
+        scan = (
+            f", each with its own structure scan (the estimate's structure, {self.kept_structure},"
+            f" kept in {self.same_structure} of {self.replicates})"
+            if self.rescanned
+            else ""
+        )
         return (
             f"Each cell: error ± std over the sine's periods ± std over {self.replicates} "
-            "bootstrap refits on the estimation periods (docs/design.md §7.7).\n\n"
+            f"bootstrap refits on the estimation periods{scan} (docs/design.md §7.7).\n\n"
         )
 
 
@@ -190,6 +209,13 @@ class IdentificationResult:
                 "level1_bootstrap_std": None
                 if self.bootstrap is None
                 else _spread_rows(self.bootstrap.spreads_level1),
+                # config.bootstrap_scan: the structure each replicate's scan kept.
+                "bootstrap_structures": None
+                if self.bootstrap is None or not self.bootstrap.rescanned
+                else {
+                    "estimate": self.bootstrap.kept_structure,
+                    "replicates": self.bootstrap.replicate_structures,
+                },
                 "held_out_levels": self.held_out_errors,
             },
             "table1": {

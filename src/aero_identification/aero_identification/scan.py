@@ -99,6 +99,12 @@ class ScanRow:
     # validation_error is then their mean. Empty: one split.
     split_errors: tuple[float, ...] = ()
 
+    @property
+    def structure_label(self) -> str:
+        """The candidate's structure, without its start: "nx 1, degrees 2,3, state, full"."""
+        degrees = ",".join(map(str, self.degrees))
+        return f"nx {self.nx}, degrees {degrees}, {self.equations}, {self.structure}"
+
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["degrees"] = list(self.degrees)
