@@ -13,13 +13,17 @@ sim_actuator.seed:=S``, and compares:
 
     .venv/bin/python bench/adaptive.py [--seeds 0 1 2] [--out DIR] [--reuse]
                                        [--plan default] [-p NODE.PARAM:=VALUE ...]
-                                       [--bootstrap B] [--common-sines]
+                                       [--bootstrap B [--bootstrap-scan] [--fixed-only]]
+                                       [--common-sines]
 
 ``--bootstrap B`` refits every run's bag with ``aero-rig fit BAG --bootstrap B`` (into
 ``<run>/fit_bootstrap``; reused with ``--reuse``) and compares those tables: each cell's spread
 is then sqrt(s² + b²), s the std over the sine's periods and b the std over B bootstrap refits
 on the estimation periods (docs/design.md §7.7), so that "within its spread" includes the
-models' estimation scatter.
+models' estimation scatter. ``--bootstrap-scan`` reruns the structure scan in every replicate
+(``aero-rig fit --bootstrap-scan``, into ``<run>/fit_bootstrap_scan``), so that b includes
+which structure the scan keeps; ``--fixed-only`` refits only the fixed runs' bags, the
+reference spreads that ``--common-sines`` compares against.
 
 ``--common-sines`` also identifies each adaptive run again from its bag and scores its models
 on the fixed run's sine records (``identify(..., models_from=...)``): both tables then rest on
@@ -62,28 +66,34 @@ def run(out: Path, seed: int, adaptive: bool, plan: str, extra: list[str]) -> fl
     return time.monotonic() - t0
 
 
-BOOTSTRAP_DIR = "fit_bootstrap"  # <run>/fit_bootstrap: the bag refitted with --bootstrap
+# <run>/fit_bootstrap: the bag refitted with --bootstrap; fit_bootstrap_scan: with
+# --bootstrap-scan too (each replicate reruns the structure scan).
+BOOTSTRAP_DIRS = {False: "fit_bootstrap", True: "fit_bootstrap_scan"}
 
 
-def refit(run_dir: Path, replicates: int, reuse: bool) -> float:
-    """``aero-rig fit <run>/bag --bootstrap B`` into <run>/fit_bootstrap; its wall time [s]
-    (0 when reused)."""
-    out = run_dir / BOOTSTRAP_DIR
+def refit(run_dir: Path, replicates: int, reuse: bool, scan: bool = False) -> float:
+    """``aero-rig fit <run>/bag --bootstrap B [--bootstrap-scan]`` into <run>/fit_bootstrap
+    (fit_bootstrap_scan); its wall time [s] (0 when reused)."""
+    boot = BOOTSTRAP_DIRS[scan]
+    out = run_dir / boot
     if reuse and (out / "table1_all_levels.csv").exists():
         return 0.0
     args = [sys.executable, "-m", "aero_rig.cli", "fit", str(run_dir / "bag"), "--out", str(out)]
     t0 = time.monotonic()
-    proc = subprocess.run([*args, "--bootstrap", str(replicates)], capture_output=True, text=True)
-    (run_dir / f"{BOOTSTRAP_DIR}.out").write_text(proc.stdout + proc.stderr)
+    args += ["--bootstrap", str(replicates), *(["--bootstrap-scan"] if scan else [])]
+    proc = subprocess.run(args, capture_output=True, text=True)
+    (run_dir / f"{boot}.out").write_text(proc.stdout + proc.stderr)
     if proc.returncode != 0:
         raise RuntimeError(f"{run_dir.name}: fit exit {proc.returncode}\n{proc.stderr[-2000:]}")
     return time.monotonic() - t0
 
 
-def table1(run_dir: Path) -> dict[tuple[str, str], tuple[float, float]]:
+def table1(
+    run_dir: Path, boot: str = "fit_bootstrap"
+) -> dict[tuple[str, str], tuple[float, float]]:
     """{(model, column): (error, spread)} of table1_all_levels.csv: the bootstrap refit's
-    (<run>/fit_bootstrap) when there is one, its spread sqrt(std² + estimation std²)."""
-    source = run_dir / BOOTSTRAP_DIR if (run_dir / BOOTSTRAP_DIR).is_dir() else run_dir
+    (<run>/<boot>) when there is one, its spread sqrt(std² + estimation std²)."""
+    source = run_dir / boot if (run_dir / boot).is_dir() else run_dir
     with (source / "table1_all_levels.csv").open() as f:
         rows = list(csv.reader(f))
     header = rows[0]
@@ -142,10 +152,10 @@ def within(
     return outside, worst
 
 
-def compare(fixed: Path, adaptive: Path) -> dict[str, Any]:
+def compare(fixed: Path, adaptive: Path, boot: str) -> dict[str, Any]:
     account = json.loads((adaptive / "models.json").read_text())["experiment"]
     planned = json.loads((fixed / "models.json").read_text())["experiment"]
-    a, f = table1(adaptive), table1(fixed)
+    a, f = table1(adaptive, boot), table1(fixed, boot)
     outside, worst = within({k: v for k, (v, _) in a.items()}, f)
     return {
         "multisine_s": account["multisine_executed_s"],
@@ -189,7 +199,16 @@ def main() -> int:
         "--bootstrap", type=int, default=0, metavar="B",
         help="refit each bag with `aero-rig fit --bootstrap B` and compare with its spreads",
     )  # fmt: skip
+    parser.add_argument(
+        "--bootstrap-scan", action="store_true",
+        help="with --bootstrap: rerun the structure scan in every replicate (fit_bootstrap_scan)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--fixed-only", action="store_true",
+        help="with --bootstrap: refit only the fixed runs' bags (what --common-sines needs)",
+    )  # fmt: skip
     args = parser.parse_args()
+    boot = BOOTSTRAP_DIRS[args.bootstrap_scan]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {}
@@ -199,13 +218,14 @@ def main() -> int:
             run_dir = out / f"{mode}_{seed}"
             if not (args.reuse and (run_dir / "models.json").exists()):
                 walls[mode] = round(run(run_dir, seed, mode == "adaptive", args.plan, args.params))
-            if args.bootstrap > 0:
-                walls[f"{mode}_fit"] = round(refit(run_dir, args.bootstrap, args.reuse))
-        result = compare(out / f"fixed_{seed}", out / f"adaptive_{seed}")
+            if args.bootstrap > 0 and not (args.fixed_only and mode == "adaptive"):
+                wall = refit(run_dir, args.bootstrap, args.reuse, args.bootstrap_scan)
+                walls[f"{mode}_fit"] = round(wall)
+        result = compare(out / f"fixed_{seed}", out / f"adaptive_{seed}", boot)
         result["wall_s"] = walls
         if args.common_sines:
             common = on_common_sines(out / f"fixed_{seed}", out / f"adaptive_{seed}")
-            off, worst = within(common, table1(out / f"fixed_{seed}"))
+            off, worst = within(common, table1(out / f"fixed_{seed}", boot))
             result["common_sines"] = {
                 "cells_outside_spread": off,
                 "worst_difference_in_spreads": round(worst, 2),
@@ -235,7 +255,7 @@ def main() -> int:
     for a, b in zip(seeds, seeds[1:] + seeds[:1], strict=True):
         if a == b:
             continue
-        fa, fb = table1(out / f"fixed_{a}"), table1(out / f"fixed_{b}")
+        fa, fb = table1(out / f"fixed_{a}", boot), table1(out / f"fixed_{b}", boot)
         outside = [key for key, (value, _) in fa.items() if abs(value - fb[key][0]) > fb[key][1]]
         baseline[f"fixed_{a} vs fixed_{b}"] = len(outside)
         print(f"fixed seed {a} against fixed seed {b}: {len(fa) - len(outside)} of {len(fa)} "
@@ -244,8 +264,8 @@ def main() -> int:
     # fixed against adaptive; "within" when the means differ by less than the fixed runs' std.
     across: dict[str, Any] = {}
     if len(seeds) >= 2:
-        fixed = [table1(out / f"fixed_{s}") for s in seeds]
-        adapt = [table1(out / f"adaptive_{s}") for s in seeds]
+        fixed = [table1(out / f"fixed_{s}", boot) for s in seeds]
+        adapt = [table1(out / f"adaptive_{s}", boot) for s in seeds]
         for key in fixed[0]:
             f = np.array([t[key][0] for t in fixed])
             a = np.array([t[key][0] for t in adapt])
