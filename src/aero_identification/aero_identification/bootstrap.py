@@ -15,9 +15,11 @@ within each realization and among the periods the clustering kept. The realizati
 phases) stay as measured: with M = 2 per level, resampling them would repeat one realization
 half of the time and leave the nonlinear distortion inseparable.
 
-What is not resampled: which periods the clustering keeps, and which PNLSS structure the scan
-keeps (each replicate refits the kept structure from its own start; rerunning the scan would
-cost the scan's time B times). The spread is therefore a lower bound on the run-to-run scatter.
+What is not resampled: which periods the clustering keeps, and by default which PNLSS
+structure the scan keeps (each replicate refits the kept structure from its own start). With
+``config.bootstrap_scan`` every replicate reruns the scan, at the scan's time B times, so that
+the spread includes the selection (Efron 2014, "Estimation and accuracy after model selection",
+JASA 109(507)). Either way the spread is a lower bound on the run-to-run scatter.
 
 This module holds the numerical pieces; `pipeline.identify` runs the replicates
 (``config.bootstrap``).
