@@ -91,7 +91,9 @@ def test_every_replicate_runs_its_own_scan_and_says_what_it_kept(
     assert f"3 structure scans (the estimate's structure kept in {boot.same_structure})" in line
     write_report(result, tmp_path)
     md = (tmp_path / "table1_all_levels.md").read_text()
-    assert f"each with its own structure scan (the estimate's structure, {boot.kept_structure}" in md
+    assert (
+        f"each with its own structure scan (the estimate's structure, {boot.kept_structure}" in md
+    )
     payload = json.loads((tmp_path / "models.json").read_text())["errors"]
     assert payload["bootstrap_structures"] == {
         "estimate": boot.kept_structure,
