@@ -202,9 +202,11 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
 
     def _on_signal(signum: int, _frame: Any) -> None:
         # kill, a job scheduler's time limit or a closed terminal: stop the graph as Ctrl-C does
-        # (the nodes are in their own process groups and would otherwise run on).
+        # (the nodes are in their own process groups and would otherwise run on). Only noted
+        # here: the loop below sees it within one spin. An exception raised from the handler
+        # could surface anywhere, also outside the try below (CI once saw the campaign die
+        # of an uncaught KeyboardInterrupt, exit -2, on SIGTERM).
         stopped_by.append(signal.Signals(signum).name)
-        raise KeyboardInterrupt
 
     previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGHUP)}
     launcher.start()
@@ -212,7 +214,7 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
     checked, stopped = 0.0, {}
     progress = tqdm(total=1, unit="sample", unit_scale=True, desc="experiment", disable=quiet)
     try:
-        while reason is None:
+        while reason is None and not stopped_by:
             monitor.spin(0.2)
             if monitor.total and progress.total != monitor.total:
                 progress.total = monitor.total
@@ -234,9 +236,7 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
                 launcher.failure = reason
     except KeyboardInterrupt:
         reason = "interrupted"
-        launcher.failure = (
-            f"stopped by {stopped_by[0]}" if stopped_by else "interrupted by the user"
-        )
+        launcher.failure = "interrupted by the user"
     finally:
         previous[signal.SIGINT] = signal.getsignal(signal.SIGINT)
         for sig in previous:  # the graph is being stopped (bounded): let that finish
@@ -246,6 +246,9 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
         codes = launcher.stop()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    if stopped_by:  # SIGTERM or SIGHUP, also one that came as the run ended by itself
+        reason = "interrupted"
+        launcher.failure = f"stopped by {stopped_by[0]}"
     return Outcome(
         reason,
         codes,
