@@ -89,7 +89,7 @@ def refit(run_dir: Path, replicates: int, reuse: bool, scan: bool = False) -> fl
 
 
 def table1(
-    run_dir: Path, boot: str = "fit_bootstrap"
+    run_dir: Path, boot: str = BOOTSTRAP_DIRS[False]
 ) -> dict[tuple[str, str], tuple[float, float]]:
     """{(model, column): (error, spread)} of table1_all_levels.csv: the bootstrap refit's
     (<run>/<boot>) when there is one, its spread sqrt(std² + estimation std²)."""

@@ -850,7 +850,9 @@ def _estimation_bootstrap(
     t0 = time.perf_counter()
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     every, level1 = _refit_candidates(result, config)
-    rescan = config.bootstrap_scan and result.scan is not None
+    # bootstrap_scan: the estimate's kept structure, against which the replicates' are counted.
+    kept = result.scan.best_row.structure_label if result.scan is not None else ""
+    rescan = config.bootstrap_scan and bool(kept)
     structures: list[str] = []  # what each replicate's scan kept (rescan)
     if config.bootstrap_scan and not rescan:
         result.warnings.append(
@@ -927,7 +929,7 @@ def _estimation_bootstrap(
         failed_all=failed_all,
         failed_level1=failed_level1,
         seconds=time.perf_counter() - t0,
-        kept_structure=result.scan.best_row.structure_label if rescan and result.scan else "",
+        kept_structure=kept if rescan else "",
         replicate_structures=structures,
     )
     for table, failed in (("all levels", failed_all), ("level 1", failed_level1)):
