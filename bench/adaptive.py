@@ -101,7 +101,7 @@ def table1(
     cells = {}
     for row in rows[1:]:
         for i, name in enumerate(header):
-            if i == 0 or name.endswith(" std"):
+            if i == 0 or name.endswith((" std", " estimation mean")):
                 continue
             value = float(row[i]) if row[i] else math.nan
             parts = [row[j] for j in (index.get(f"{name} std"), index.get(f"{name} estimation std"))

@@ -389,11 +389,16 @@ def test_final_identification_with_the_estimation_bootstrap(campaign, tmp_path) 
     md = (tmp_path / "table1_all_levels.md").read_text()
     assert "std over 3 bootstrap refits" in md and md.count("±") == 2 + 2 * 3 * 4  # note, cells
     header = (tmp_path / "table1_all_levels.csv").read_text().splitlines()[0]
-    assert header.count("estimation std") == 4
+    assert header.count("estimation std") == 4 and header.count("estimation mean") == 4
     errors = json.loads((tmp_path / "models.json").read_text())["errors"]
     assert errors["bootstrap_replicates"] == 3
     rows = {(m, lv, f): s for m, lv, f, s in errors["all_levels_bootstrap_std"]}
     assert rows[("PNLSS", "high", 1.6)] == boot.spreads_all[("PNLSS", "high", 1.6)]
+    # The replicates' mean per cell (bootstrap bias = mean − error), in the result and JSON.
+    assert set(boot.means_all) == set(result.errors_all)
+    assert all(math.isfinite(m) and m > 0 for m in boot.means_all.values())
+    means = {(m, lv, f): v for m, lv, f, v in errors["level1_bootstrap_mean"]}
+    assert means == {k: v if math.isfinite(v) else None for k, v in boot.means_level1.items()}
 
 
 def test_estimation_bootstrap_refits_on_the_given_dask_client(campaign) -> None:

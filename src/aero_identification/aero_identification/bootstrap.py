@@ -71,15 +71,20 @@ def resample_periods(
 
 def replicate_spreads(
     replicates: Sequence[Mapping[Cell, float]], cells: Sequence[Cell]
-) -> tuple[dict[Cell, float], dict[Cell, int]]:
-    """The bootstrap standard error of each cell (sample std, ddof 1, over the replicates
-    whose model gave a finite error) and, per cell, how many replicates did not (a model that
-    failed to fit, or diverged on the sine). Fewer than two finite values: NaN."""
+) -> tuple[dict[Cell, float], dict[Cell, float], dict[Cell, int]]:
+    """Per cell, over the replicates whose model gave a finite error: the bootstrap standard
+    error (sample std, ddof 1) and the replicates' mean; and how many replicates did not give
+    one (a model that failed to fit, or diverged on the sine). The mean minus the estimate's
+    error is the bootstrap estimate of the estimate's bias (Efron & Tibshirani 1993, §10.2):
+    it says whether the estimate's cell is typical of the procedure on other draws of the
+    periods. Fewer than two finite values: NaN std (and NaN mean without one)."""
     spreads: dict[Cell, float] = {}
+    means: dict[Cell, float] = {}
     failed: dict[Cell, int] = {}
     for cell in cells:
         values = [r.get(cell, math.nan) for r in replicates]
         finite = np.array([v for v in values if math.isfinite(v)])
         failed[cell] = len(values) - finite.size
         spreads[cell] = float(np.std(finite, ddof=1)) if finite.size >= 2 else math.nan
-    return spreads, failed
+        means[cell] = float(np.mean(finite)) if finite.size else math.nan
+    return spreads, means, failed

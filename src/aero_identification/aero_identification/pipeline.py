@@ -920,12 +920,16 @@ def _estimation_bootstrap(
         _validate(dataset, rep)
         replicates_all.append(dict(rep.errors_all))
         replicates_level1.append(dict(rep.errors_level1))
-    spreads_all, failed_all = replicate_spreads(replicates_all, list(result.errors_all))
-    spreads_level1, failed_level1 = replicate_spreads(replicates_level1, list(result.errors_level1))
+    spreads_all, means_all, failed_all = replicate_spreads(replicates_all, list(result.errors_all))
+    spreads_level1, means_level1, failed_level1 = replicate_spreads(
+        replicates_level1, list(result.errors_level1)
+    )
     result.bootstrap = EstimationSpread(
         replicates=config.bootstrap,
         spreads_all=spreads_all,
         spreads_level1=spreads_level1,
+        means_all=means_all,
+        means_level1=means_level1,
         failed_all=failed_all,
         failed_level1=failed_level1,
         seconds=time.perf_counter() - t0,

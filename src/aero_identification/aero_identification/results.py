@@ -47,12 +47,15 @@ class LevelResult:
 @dataclass
 class EstimationSpread:
     """Table 1's estimation spread (bootstrap.py, ``config.bootstrap``): per cell, the std of
-    the error over refits on bootstrap replicates of the estimation periods, and how many
-    replicates failed or diverged there."""
+    the error over refits on bootstrap replicates of the estimation periods, the replicates'
+    mean (minus the estimate's error: the bootstrap's bias estimate, bootstrap.py), and how
+    many replicates failed or diverged there."""
 
     replicates: int
     spreads_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
     spreads_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    means_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    means_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
     failed_all: dict[tuple[str, str, float], int] = field(default_factory=dict)
     failed_level1: dict[tuple[str, str, float], int] = field(default_factory=dict)
     seconds: float = 0.0
@@ -144,10 +147,12 @@ class IdentificationResult:
             tables["table1_all_levels"] = table1(
                 self.errors_all, levels, freqs, spreads=self.spreads_all,
                 estimation_spreads=None if boot is None else boot.spreads_all,
+                estimation_means=None if boot is None else boot.means_all,
             )  # fmt: skip
             tables["table1_level1"] = table1(
                 self.errors_level1, levels, freqs, spreads=self.spreads_level1,
                 estimation_spreads=None if boot is None else boot.spreads_level1,
+                estimation_means=None if boot is None else boot.means_level1,
             )  # fmt: skip
             if boot is not None:
                 for key in ("table1_all_levels", "table1_level1"):
@@ -209,6 +214,13 @@ class IdentificationResult:
                 "level1_bootstrap_std": None
                 if self.bootstrap is None
                 else _spread_rows(self.bootstrap.spreads_level1),
+                # The replicates' mean per cell (minus the error: the bootstrap's bias).
+                "all_levels_bootstrap_mean": None
+                if self.bootstrap is None
+                else _spread_rows(self.bootstrap.means_all),
+                "level1_bootstrap_mean": None
+                if self.bootstrap is None
+                else _spread_rows(self.bootstrap.means_level1),
                 # config.bootstrap_scan: the structure each replicate's scan kept.
                 "bootstrap_structures": None
                 if self.bootstrap is None or not self.bootstrap.rescanned
@@ -242,7 +254,7 @@ class IdentificationResult:
 
 
 def _spread_rows(spreads: dict[tuple[str, str, float], float]) -> list[list[Any]]:
-    """[[model, level, freq_hz, spread or None], ...]: NaN (undefined) as null in JSON."""
+    """[[model, level, freq_hz, value or None], ...]: NaN (undefined) as null in JSON."""
     return [[m, lv, f, s if math.isfinite(s) else None] for (m, lv, f), s in spreads.items()]
 
 

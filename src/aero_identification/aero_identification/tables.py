@@ -27,6 +27,7 @@ def table1(
     digits: int = 2,
     spreads: Mapping[tuple[str, str, float], float] | None = None,
     estimation_spreads: Mapping[tuple[str, str, float], float] | None = None,
+    estimation_means: Mapping[tuple[str, str, float], float] | None = None,
 ) -> tuple[str, str]:
     """The paper's Table 1: relative RMS errors, rows = models, columns = levels × frequencies.
 
@@ -45,6 +46,9 @@ def table1(
             estimation periods (bootstrap.py). Shown as a second "± s" after the spread in
             Markdown ("–" in its place when the first is missing), and in the CSV as a
             "<column> estimation std" column after the "<column> std" one.
+        estimation_means: the same keys: the bootstrap refits' mean error (the mean minus the
+            cell is the bootstrap's bias estimate). In the CSV only, as a "<column> estimation
+            mean" column after the "<column> estimation std" one (with ``estimation_spreads``).
 
     Returns:
         (markdown, csv_text). Columns: "model", then "<level> <freq> Hz" for each level, and
@@ -74,11 +78,18 @@ def table1(
     cells = place(errors)
     spread_cells = {k: v for k, v in place(spreads or {}).items() if np.isfinite(v)}
     boot_cells = {k: v for k, v in place(estimation_spreads or {}).items() if np.isfinite(v)}
+    mean_cells = {k: v for k, v in place(estimation_means or {}).items() if np.isfinite(v)}
     columns = [_column_name(lv, f) for lv in levels for f in freqs_arr]
     header = ["model", *columns]
     with_boot = estimation_spreads is not None
+    with_mean = with_boot and estimation_means is not None
     with_std = spreads is not None or with_boot
-    suffixes = ("",) + ((" std",) if with_std else ()) + ((" estimation std",) if with_boot else ())
+    suffixes = (
+        ("",)
+        + ((" std",) if with_std else ())
+        + ((" estimation std",) if with_boot else ())
+        + ((" estimation mean",) if with_mean else ())
+    )
     header_csv = ["model"] + [c + sfx for c in columns for sfx in suffixes]
     rows_md: list[list[str]] = []
     rows_csv: list[list[str]] = []
@@ -100,6 +111,9 @@ def table1(
                     cs.append("" if spread is None else repr(spread))
                 if with_boot:
                     cs.append("" if boot is None else repr(boot))
+                if with_mean:
+                    mean = mean_cells.get((model, level, i))
+                    cs.append("" if mean is None else repr(mean))
         rows_md.append(md)
         rows_csv.append(cs)
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]

@@ -74,7 +74,32 @@ def test_the_bootstrap_std_of_a_period_mean_is_its_standard_error() -> None:
 def test_replicate_spreads_count_failures_and_need_two_values() -> None:
     a, b, c = ("PNLSS", "low", 0.4), ("PNLSS", "high", 1.6), ("BLA SS", "high", 1.0)
     reps = [{a: 0.10, b: 0.5, c: 0.2}, {a: 0.12, b: math.inf}, {a: 0.14, c: 0.3}]
-    spreads, failed = replicate_spreads(reps, [a, b, c])
+    spreads, means, failed = replicate_spreads(reps, [a, b, c])
     assert spreads[a] == pytest.approx(0.02) and failed[a] == 0
+    assert means[a] == pytest.approx(0.12)
     assert math.isnan(spreads[b]) and failed[b] == 2  # one finite value: undefined
+    assert means[b] == pytest.approx(0.5)  # the mean of the one finite value
     assert spreads[c] == pytest.approx(np.std([0.2, 0.3], ddof=1)) and failed[c] == 1
+    assert means[c] == pytest.approx(0.25)
+    _, none, _ = replicate_spreads([{a: math.inf}], [a])
+    assert math.isnan(none[a])
+
+
+def test_the_replicates_mean_estimates_the_plug_in_variances_bias() -> None:
+    """Efron & Tibshirani 1993 §10.2: for the plug-in variance (ddof 0) of P draws, the
+    bootstrap bias estimate, mean over replicates minus the estimate, tends to −σ̂²/P with σ̂²
+    the plug-in variance itself; for the sample mean it tends to 0."""
+    rng = np.random.default_rng(5)
+    P = 6
+    y = rng.normal(size=(4, P, 1))  # the statistic reads the first sample of each period
+    data = PeriodicData(np.zeros_like(y), y, fs=1.0, excited_lines=np.array([1]))
+    var, mean = ("var", "low", 0.4), ("mean", "low", 0.4)
+    reps = []
+    for _ in range(4000):
+        draw = resample_periods(data, None, rng).y[0, :, 0]
+        reps.append({var: float(draw.var()), mean: float(draw.mean())})
+    _, means, _ = replicate_spreads(reps, [var, mean])
+    theta = float(y[0, :, 0].var())
+    # resample_periods redraws a draw of one period repeated everywhere (P^(1-P), negligible).
+    assert means[var] - theta == pytest.approx(-theta / P, rel=0.08)
+    assert means[mean] - float(y[0, :, 0].mean()) == pytest.approx(0.0, abs=0.03 * y[0].std())

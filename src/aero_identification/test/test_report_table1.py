@@ -274,5 +274,21 @@ def test_table1_with_estimation_spreads_shows_both() -> None:
     for row in csv.DictReader(io.StringIO(periods_csv)):
         assert all(table[row["model"]][k] == v for k, v in row.items())
     assert with_periods.count("±") == 2
+    # The replicates' mean: a CSV column after each "estimation std"; the Markdown unchanged.
+    means = {("BLA FRF", "low", 0.4): 0.55, ("PNLSS", "low", 1.0): float("nan")}
+    md_means, csv_means = table1(
+        errors, LEVELS, FREQS, spreads=spreads, estimation_spreads=boot, estimation_means=means
+    )
+    assert md_means == markdown
+    rows = list(csv.reader(io.StringIO(csv_means)))
+    assert rows[0] == ["model"] + [
+        c
+        for col in columns
+        for c in (col, f"{col} std", f"{col} estimation std", f"{col} estimation mean")
+    ]
+    with_mean = {r[0]: dict(zip(rows[0], r, strict=True)) for r in rows[1:]}
+    assert float(with_mean["BLA FRF"]["low 0.4 Hz estimation mean"]) == 0.55
+    assert with_mean["PNLSS"]["low 1 Hz estimation mean"] == ""  # NaN: empty
+    assert all(with_mean[m][k] == v for m, row in table.items() for k, v in row.items())
     with pytest.raises(ValueError, match="not in the table layout"):
         table1(errors, LEVELS, FREQS, estimation_spreads={("PNLSS", "low", 0.5): 0.01})
