@@ -3,6 +3,7 @@
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,6 +45,12 @@ class LevelResult:
         return list(self.record.excluded)
 
 
+# EstimationSpread.off_mean: a cell whose error is farther than this many estimation spreads
+# from the bootstrap refits' mean is named in the table's note (about 5 % of cells by chance
+# if the replicates' errors were normal around the estimate's).
+OFF_MEAN_SPREADS = 2.0
+
+
 @dataclass
 class EstimationSpread:
     """Table 1's estimation spread (bootstrap.py, ``config.bootstrap``): per cell, the std of
@@ -73,18 +80,47 @@ class EstimationSpread:
         """Replicates whose scan kept the estimate's structure."""
         return sum(s == self.kept_structure for s in self.replicate_structures)
 
-    @property
-    def note(self) -> str:
-        """What the Markdown tables' second ± is (a line above each table)."""
+    def off_mean(
+        self, errors: Mapping[tuple[str, str, float], float], level1: bool = False
+    ) -> dict[tuple[str, str, float], float]:
+        """The cells of ``errors`` (all-levels table, or level 1's) whose estimate lies more
+        than OFF_MEAN_SPREADS estimation spreads from the replicates' mean, with that distance
+        in spreads (positive: the replicates' mean is worse than the estimate): there the
+        estimate is not typical of its fitting procedure (docs/design.md §7.7)."""
+        means = self.means_level1 if level1 else self.means_all
+        spreads = self.spreads_level1 if level1 else self.spreads_all
+        off: dict[tuple[str, str, float], float] = {}
+        for cell, error in errors.items():
+            mean, spread = means.get(cell, math.nan), spreads.get(cell, math.nan)
+            if all(math.isfinite(v) for v in (error, mean, spread)) and spread > 0:
+                units = (mean - error) / spread
+                if abs(units) > OFF_MEAN_SPREADS:
+                    off[cell] = units
+        return off
+
+    def note(self, errors: Mapping[tuple[str, str, float], float], level1: bool = False) -> str:
+        """What the Markdown tables' second ± is (a line above each table), and the cells of
+        ``errors`` whose estimate is off the replicates' mean (`off_mean`)."""
         scan = (
             f", each with its own structure scan (the estimate's structure, {self.kept_structure},"
             f" kept in {self.same_structure} of {self.replicates})"
             if self.rescanned
             else ""
         )
+        off = self.off_mean(errors, level1)
+        better = sum(u > 0 for u in off.values())
+        far = (
+            f" In {len(off)} of {len(errors)} cells the error lies more than "
+            f"{OFF_MEAN_SPREADS:g} estimation spreads from the refits' mean ({better} below it, "
+            f"{len(off) - better} above): there the estimate is not typical of what its "
+            "fitting procedure gives on other draws of the periods; the CSV's `estimation "
+            "mean` columns give the means."
+            if off
+            else ""
+        )
         return (
             f"Each cell: error ± std over the sine's periods ± std over {self.replicates} "
-            f"bootstrap refits on the estimation periods{scan} (docs/design.md §7.7).\n\n"
+            f"bootstrap refits on the estimation periods{scan} (docs/design.md §7.7).{far}\n\n"
         )
 
 
@@ -157,7 +193,9 @@ class IdentificationResult:
             if boot is not None:
                 for key in ("table1_all_levels", "table1_level1"):
                     md, csv_text = tables[key]
-                    tables[key] = (boot.note + md, csv_text)
+                    errors = self.errors_level1 if key == "table1_level1" else self.errors_all
+                    note = boot.note(errors, level1=key == "table1_level1")
+                    tables[key] = (note + md, csv_text)
             if self.no_clustering is not None:
                 tables["table1_no_clustering"] = table1(
                     self.no_clustering.errors_all,

@@ -7,6 +7,7 @@ import pytest
 
 from aero_identification.bootstrap import replicate_spreads, resample_periods
 from aero_identification.data import PeriodicData
+from aero_identification.results import EstimationSpread
 
 
 def _data(P: int = 6, M: int = 2, N: int = 8) -> PeriodicData:
@@ -103,3 +104,24 @@ def test_the_replicates_mean_estimates_the_plug_in_variances_bias() -> None:
     # resample_periods redraws a draw of one period repeated everywhere (P^(1-P), negligible).
     assert means[var] - theta == pytest.approx(-theta / P, rel=0.08)
     assert means[mean] - float(y[0, :, 0].mean()) == pytest.approx(0.0, abs=0.03 * y[0].std())
+
+
+def test_the_note_names_cells_whose_estimate_is_off_the_replicates_mean() -> None:
+    """EstimationSpread.off_mean / note: a cell whose error is more than 2 estimation spreads
+    from the refits' mean is counted, with its side; the others, and cells without a finite
+    mean or spread, are not."""
+    a, b, c, d = (("PNLSS", "low", f) for f in (0.4, 1.0, 1.6, 2.0))
+    errors = {a: 0.07, b: 0.10, c: 0.30, d: 0.10}
+    boot = EstimationSpread(
+        replicates=10,
+        spreads_all={a: 0.01, b: 0.01, c: 0.02, d: math.nan},
+        means_all={a: 0.10, b: 0.115, c: 0.20, d: 0.5},
+    )
+    off = boot.off_mean(errors)
+    assert set(off) == {a, c}  # b: 1.5 spreads; d: no spread
+    assert off[a] == pytest.approx(3.0) and off[c] == pytest.approx(-5.0)
+    note = boot.note(errors)
+    assert "In 2 of 4 cells the error lies more than 2 estimation spreads" in note
+    assert "(1 below it, 1 above)" in note
+    assert boot.off_mean(errors, level1=True) == {}  # level 1's means: none given
+    assert "cells the error lies" not in boot.note(errors, level1=True)

@@ -108,7 +108,7 @@ def test_without_it_the_replicates_refit_the_kept_structure(monkeypatch: Any) ->
     result = identify(_dataset(), dataclasses.replace(CONFIG, bootstrap_scan=False), final=True)
     assert len(seen) == 1
     assert result.bootstrap is not None and not result.bootstrap.rescanned
-    assert "structure scan" not in result.bootstrap.note
+    assert "structure scan" not in result.bootstrap.note(result.errors_all)
 
 
 def test_without_a_scan_it_says_so_and_refits_the_one_structure(monkeypatch: Any) -> None:
