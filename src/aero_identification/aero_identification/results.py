@@ -191,11 +191,12 @@ class IdentificationResult:
                 estimation_means=None if boot is None else boot.means_level1,
             )  # fmt: skip
             if boot is not None:
-                for key in ("table1_all_levels", "table1_level1"):
+                for key, errors, level1 in (
+                    ("table1_all_levels", self.errors_all, False),
+                    ("table1_level1", self.errors_level1, True),
+                ):
                     md, csv_text = tables[key]
-                    errors = self.errors_level1 if key == "table1_level1" else self.errors_all
-                    note = boot.note(errors, level1=key == "table1_level1")
-                    tables[key] = (note + md, csv_text)
+                    tables[key] = (boot.note(errors, level1) + md, csv_text)
             if self.no_clustering is not None:
                 tables["table1_no_clustering"] = table1(
                     self.no_clustering.errors_all,
