@@ -91,14 +91,19 @@ def refit(run_dir: Path, replicates: int, reuse: bool, scan: bool = False) -> fl
     return time.monotonic() - t0
 
 
+def _table1_csv(directory: Path) -> list[list[str]]:
+    """The rows of <directory>/table1_all_levels.csv, the header first."""
+    with (directory / "table1_all_levels.csv").open() as f:
+        return list(csv.reader(f))
+
+
 def table1(
     run_dir: Path, boot: str = BOOTSTRAP_DIRS[False]
 ) -> dict[tuple[str, str], tuple[float, float]]:
     """{(model, column): (error, spread)} of table1_all_levels.csv: the bootstrap refit's
     (<run>/<boot>) when there is one, its spread sqrt(std² + estimation std²)."""
     source = run_dir / boot if (run_dir / boot).is_dir() else run_dir
-    with (source / "table1_all_levels.csv").open() as f:
-        rows = list(csv.reader(f))
+    rows = _table1_csv(source)
     header = rows[0]
     index = {name: i for i, name in enumerate(header)}
     cells = {}
@@ -119,11 +124,9 @@ def procedure_means(run_dir: Path, boot: str) -> dict[tuple[str, str], float]:
     table1_all_levels.csv (its "<column> estimation mean"; empty without one): what the
     fitting procedure gives on other draws of the run's periods, not only on the run's own
     (docs/design.md §7.7)."""
-    path = run_dir / boot / "table1_all_levels.csv"
-    if not path.exists():
+    if not (run_dir / boot / "table1_all_levels.csv").exists():
         return {}
-    with path.open() as f:
-        rows = list(csv.reader(f))
+    rows = _table1_csv(run_dir / boot)
     suffix = " estimation mean"
     return {
         (row[0], name.removesuffix(suffix)): float(row[i]) if row[i] else math.nan

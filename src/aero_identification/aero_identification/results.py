@@ -216,6 +216,18 @@ class IdentificationResult:
         note = data_quality_note(self.data_quality)
         return {key: (note + md, csv) for key, (md, csv) in tables.items()}
 
+    def _bootstrap_rows(self) -> dict[str, list[list[Any]] | None]:
+        """models.json's per-cell rows of the estimation bootstrap: the std over the refits
+        and their mean (minus the error: the bootstrap's bias), each table; null when the
+        bootstrap did not run."""
+        boot = self.bootstrap
+        names = [f"{table}_bootstrap_{what}" for what in ("std", "mean")
+                 for table in ("all_levels", "level1")]  # fmt: skip
+        if boot is None:
+            return dict.fromkeys(names)
+        values = (boot.spreads_all, boot.spreads_level1, boot.means_all, boot.means_level1)
+        return {name: _spread_rows(v) for name, v in zip(names, values, strict=True)}
+
     def to_json_dict(self) -> dict[str, Any]:
         """The /identification/model payload (also models.json in the run directory)."""
         tables = self.tables()
@@ -247,19 +259,7 @@ class IdentificationResult:
                 "bootstrap_replicates": None
                 if self.bootstrap is None
                 else self.bootstrap.replicates,
-                "all_levels_bootstrap_std": None
-                if self.bootstrap is None
-                else _spread_rows(self.bootstrap.spreads_all),
-                "level1_bootstrap_std": None
-                if self.bootstrap is None
-                else _spread_rows(self.bootstrap.spreads_level1),
-                # The replicates' mean per cell (minus the error: the bootstrap's bias).
-                "all_levels_bootstrap_mean": None
-                if self.bootstrap is None
-                else _spread_rows(self.bootstrap.means_all),
-                "level1_bootstrap_mean": None
-                if self.bootstrap is None
-                else _spread_rows(self.bootstrap.means_level1),
+                **self._bootstrap_rows(),
                 # config.bootstrap_scan: the structure each replicate's scan kept.
                 "bootstrap_structures": None
                 if self.bootstrap is None or not self.bootstrap.rescanned
