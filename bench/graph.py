@@ -5,17 +5,22 @@ Both phases run once per backend (``--backends rclpy,dds``, default both where r
 Phase 1 (throughput): the whole campaign graph (generator, sim actuator, sim wing, lift,
 identifier, recorder) runs the short plan as fast as it can (real_time_factor 0); prints the
 real-time factor, samples lost (commands without a coefficients sample, from the bag), the
-identifier's refit times, and CPU time and peak memory per node.
+identifier's refit times, and CPU time and peak memory per node. With ``--view`` the Rerun view
+node (save mode, ``campaign.rrd``) runs beside it, as ``aero-rig campaign --rerun save`` adds
+it: its CPU is then one of the nodes', and ``view_received`` counts what it took of each stream
+(it reads them best effort, so a view that cannot keep up shows as fewer samples).
 Phase 2 (latency): the graph at real-time pace for ``--latency-seconds``; an observer in this
 process timestamps the arrival of each /pitch/command sample and of its /wing/coefficients
 sample (same stamp): end-to-end latency p50/p99.
 
     .venv/bin/python bench/graph.py [--plan short] [--latency-seconds 20] [--backends rclpy,dds]
+                                    [--view]
 
 Last line: JSON {backend: {...}}, each with real_time_factor, wall_s, samples, samples_lost,
 latency_p50_ms, latency_p99_ms, refit_s (list), max_refit_s, node_cpu_s, node_peak_mb,
 refit_memory_mb (per refit: identifier node, worker at the job's start, worker peak),
-identifier_mb_by_quarter, table1_sha256 (equal across backends when the tables are).
+identifier_mb_by_quarter, table1_sha256 (equal across backends when the tables are), and with
+``--view`` view_received.
 """
 
 import argparse
@@ -32,7 +37,7 @@ import numpy as np
 import psutil
 from rosbags.highlevel import AnyReader
 
-from aero_rig.cli.common import config_path
+from aero_rig.cli.common import config_path, with_view
 from aero_rig.cli.monitor import CampaignMonitor
 from rig_runtime import ros_environment
 from rig_runtime.graph import load_graph
@@ -68,8 +73,10 @@ def _sample_processes(
         cpu[proc.spec.name] = max(cpu.get(proc.spec.name, 0.0), total)
 
 
-def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
+def throughput(plan: str, run_dir: Path, view: bool = False) -> dict[str, Any]:
     graph = load_graph(config_path("sim.yaml"))
+    if view:
+        graph = with_view(graph, "save", run_dir / "campaign.rrd")
     overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": plan, "real_time_factor": 0.0},
         "recorder": {"output": str(run_dir / "bag")},
@@ -112,7 +119,14 @@ def throughput(plan: str, run_dir: Path) -> dict[str, Any]:
             if memory:  # [node, worker at the job's start, worker peak] in MB
                 refit_memory.append([int(memory[3]), int(memory[1]), int(memory[2])])
     experiment_s = monitor.total / monitor.fs
+    extra: dict[str, Any] = {}
+    if view:  # the view's last count of what it received (View.log_stats, on its shutdown)
+        counts = re.findall(r"received (.*) errors=", (run_dir / "logs" / "view.log").read_text())
+        extra["view_received"] = {
+            k: int(v) for k, v in (item.split("=") for item in counts[-1].split())
+        }
     return {
+        **extra,
         "wall_s": round(wall, 2),
         "experiment_s": experiment_s,
         "real_time_factor": round(experiment_s / wall, 2),
@@ -184,6 +198,7 @@ def main() -> int:
     parser.add_argument("--plan", default="short", help="plan for the throughput phase")
     parser.add_argument("--latency-seconds", type=float, default=20.0)
     parser.add_argument("--keep", default=None, help="keep the run directories here")
+    parser.add_argument("--view", action="store_true", help="run the Rerun view node beside it")
     parser.add_argument(
         "--backends",
         default="rclpy,dds" if rclpy_available() else "dds",
@@ -203,7 +218,7 @@ def run_backend(args: argparse.Namespace, backend: str) -> dict[str, Any]:
     join_graph(env)
     with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
         run_dir = Path(args.keep or tmp) / backend
-        figures = throughput(args.plan, run_dir / "run")
+        figures = throughput(args.plan, run_dir / "run", args.view)
         table = figures.pop("table1_all_levels")
         figures.update(latency(args.latency_seconds, run_dir))
     print(table)
@@ -214,6 +229,8 @@ def run_backend(args: argparse.Namespace, backend: str) -> dict[str, Any]:
     )
     print(f"refits: {figures['refit_s']} s")
     print(f"cpu per node [s]: {figures['node_cpu_s']}")
+    if "view_received" in figures:
+        print(f"the view received (of {figures['samples']} samples): {figures['view_received']}")
     print(f"peak memory per node [MB]: {figures['node_peak_mb']}")
     print(
         "identifier memory per refit [MB] (node, worker at start, worker peak): "

@@ -360,6 +360,37 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
     assert "FRF level 1 [dB]" in rrd.view_names
 
 
+def test_series_go_in_batches_at_their_stamps_and_none_is_held_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Pitch and C_l samples wait in a buffer and go as one column per batch (send_columns):
+    a full batch goes at once, send_series sends the rest, every sample once at its stamp."""
+    rec, _ = rig_view.open_recording("test_view", "save", tmp_path / "batches.rrd")
+    logger = rig_view.RigViewLogger(rec, series_batch=3)
+    sent: list[tuple[str, int]] = []
+    send_columns = rec.send_columns
+
+    def spy(entity: str, indexes: Any, columns: Any) -> None:
+        sent.append((entity, len(next(iter(indexes)).as_arrow_array())))
+        send_columns(entity, indexes=indexes, columns=columns)
+
+    monkeypatch.setattr(rec, "send_columns", spy)
+    commands = [m for _, t, m in messages() if t == PITCH_COMMAND.name][:7]
+    for msg in commands:
+        logger.on_command(msg)
+    assert sent == [("/series/pitch/command", 3), ("/series/pitch/command", 3)]
+    logger.send_series()  # the node's timer: the seventh sample does not wait for a batch
+    assert sent[2:] == [("/series/pitch/command", 1)]
+    logger.send_series()  # nothing left: nothing sent twice
+    assert len(sent) == 3
+    with pytest.raises(ValueError, match="series_batch"):
+        rig_view.RigViewLogger(rec, series_batch=0)
+    rig_view.close_recording(rec)
+    times, values = Rrd(tmp_path / "batches.rrd").scalars("/series/pitch/command")
+    np.testing.assert_array_equal(times, [stamp(k) for k in range(7)])
+    np.testing.assert_allclose(values, [alpha_deg(k) for k in range(7)], atol=1e-9)
+
+
 def test_node_rejects_save_without_path_and_a_bad_mode(monkeypatch: pytest.MonkeyPatch) -> None:
     join_graph(graph_env(), monkeypatch.setenv)
     assert rig_view.main(["--ros-args", "-p", "mode:=save"]) == 2

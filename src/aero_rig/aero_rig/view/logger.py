@@ -119,6 +119,12 @@ class RigViewLogger:
     ``series_decimation``-th sample, the Cp distribution and the live C_l–α trail at every
     ``taps_decimation``-th. Model updates replace the FRF, cluster and prediction entities.
     Unparseable input raises ``ValueError``; callers decide whether to go on.
+
+    The time series (pitch command and measurement, C_l: three of every four log calls at the
+    rig's rate) are buffered and sent as columns (``rr.send_columns``, each sample at its own
+    stamp) once ``series_batch`` samples of a series are waiting, and by :meth:`send_series`,
+    which the live node calls on a timer and :meth:`flush` calls: one call per batch instead of
+    one ``log`` and one ``set_time`` per sample (docs/design.md §3.9).
     """
 
     def __init__(
@@ -127,17 +133,23 @@ class RigViewLogger:
         *,
         taps_decimation: int = 10,
         series_decimation: int = 1,
+        series_batch: int = 200,
         trail_s: float = 2.0,
         dynamic_pressure_pa: float | None = None,
         chord_m: float | None = None,
         send_blueprint: bool = True,
     ) -> None:
-        if taps_decimation < 1 or series_decimation < 1:
-            raise ValueError("taps_decimation and series_decimation must be >= 1")
+        if taps_decimation < 1 or series_decimation < 1 or series_batch < 1:
+            raise ValueError("taps_decimation, series_decimation and series_batch must be >= 1")
         wing = RigGeometry()
         self.rec = recording
         self.taps_decimation = int(taps_decimation)
         self.series_decimation = int(series_decimation)
+        self.series_batch = int(series_batch)
+        # Per series entity: the stamps [ns] and values not yet sent.
+        self._series: dict[str, tuple[list[int], list[float]]] = {
+            key: ([], []) for key in ("command", "measured", "cl")
+        }
         self.trail_ns = int(trail_s * 1e9)
         self.q_pa = float(dynamic_pressure_pa or wing.dynamic_pressure_pa)
         self.chord_m = float(chord_m or wing.chord_m)
@@ -174,13 +186,42 @@ class RigViewLogger:
         )
         log(ENTITY["cl_alpha_axes"], lines, ticks, static=True)
 
-    def _set_time(self, t_ns: int | None) -> None:
-        """Set the experiment time; ``None``: the latest stamp seen (or now, before any)."""
+    def _stamp(self, t_ns: int | None) -> int:
+        """A message's experiment time [ns]; ``None`` or unset: the latest stamp seen (or now,
+        before any)."""
         if t_ns is None or t_ns <= 0:
-            t_ns = self.last_ns if self.last_ns is not None else time.time_ns()
-        else:
-            self.last_ns = t_ns if self.last_ns is None else max(self.last_ns, t_ns)
-        self.rec.set_time(TIMELINE, timestamp=np.datetime64(int(t_ns), "ns"))
+            return self.last_ns if self.last_ns is not None else time.time_ns()
+        self.last_ns = t_ns if self.last_ns is None else max(self.last_ns, t_ns)
+        return t_ns
+
+    def _set_time(self, t_ns: int | None) -> None:
+        """Set the experiment time of the next ``log`` calls (see ``_stamp``)."""
+        self.rec.set_time(TIMELINE, timestamp=np.datetime64(int(self._stamp(t_ns)), "ns"))
+
+    def _series_sample(self, key: str, t_ns: int | None, value: float) -> None:
+        """Buffer one sample of a time series; send the series once a batch is waiting."""
+        times, values = self._series[key]
+        times.append(self._stamp(t_ns))
+        values.append(value)
+        if len(times) >= self.series_batch:
+            self._send_series(key)
+
+    def _send_series(self, key: str) -> None:
+        times, values = self._series[key]
+        if not times:
+            return
+        self.rec.send_columns(
+            ENTITY[key],
+            indexes=[rr.TimeColumn(TIMELINE, timestamp=np.array(times, dtype="datetime64[ns]"))],
+            columns=rr.Scalars.columns(scalars=np.array(values, dtype=np.float64)),
+        )
+        times.clear()
+        values.clear()
+
+    def send_series(self) -> None:
+        """Send every buffered time-series sample now (the live node's timer, and flush)."""
+        for key in self._series:
+            self._send_series(key)
 
     @staticmethod
     def _pitch_deg(msg: Any) -> float | None:
@@ -203,8 +244,7 @@ class RigViewLogger:
         deg = self._pitch_deg(msg)
         if deg is None or n % self.series_decimation:
             return
-        self._set_time(stamp_to_ns(msg.header.stamp))
-        self.rec.log(ENTITY["command"], rr.Scalars(deg))
+        self._series_sample("command", stamp_to_ns(msg.header.stamp), deg)
 
     def on_state(self, msg: Any) -> None:
         n = self.counts["state"]
@@ -219,8 +259,7 @@ class RigViewLogger:
         self._last_alpha = deg
         if n % self.series_decimation:
             return
-        self._set_time(t_ns)
-        self.rec.log(ENTITY["measured"], rr.Scalars(deg))
+        self._series_sample("measured", t_ns, deg)
 
     def on_coefficients(self, msg: Any) -> None:
         n = self.counts["coefficients"]
@@ -231,8 +270,7 @@ class RigViewLogger:
             return
         t_ns = stamp_to_ns(msg.header.stamp)
         if n % self.series_decimation == 0:
-            self._set_time(t_ns)
-            self.rec.log(ENTITY["cl"], rr.Scalars(cl))
+            self._series_sample("cl", t_ns, cl)
         if n % self.taps_decimation:
             return
         # The live C_l–α trail: decimated samples of the last trail_s seconds, as one strip.
@@ -433,6 +471,8 @@ class RigViewLogger:
         return paths
 
     def flush(self, timeout_s: float = 10.0) -> None:
+        """Send the buffered series, then wait until the recording has written everything."""
+        self.send_series()
         self.rec.flush(timeout_sec=timeout_s)
 
 

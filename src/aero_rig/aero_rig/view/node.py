@@ -42,6 +42,12 @@ PARAMETERS = [
     Parameter("application_id", "aero_rig", "Rerun application id (groups recordings)"),
     Parameter("taps_decimation", 10, "log every n-th Cp distribution / C_l–α trail", min=1),
     Parameter("series_decimation", 1, "log every n-th pitch / C_l sample", min=1),
+    Parameter(
+        "series_flush_s",
+        0.1,
+        "send the buffered pitch / C_l samples every … s (a batch of 200 goes at once)",
+        min=0.01,
+    ),
     Parameter("trail_s", 2.0, "length of the live C_l–α trail [s]", min=0.0),
     Parameter("port", 0, "spawn: viewer port; serve: gRPC port (0 = 9876)", min=0, max=65535),
     Parameter("bind_ip", "127.0.0.1", "serve: address to listen on (0.0.0.0 = all)"),
@@ -91,6 +97,8 @@ class View:
             node.create_subscription(
                 type_name, topic, self._guard(topic, getattr(self.logger, handler)), qos, depth
             )
+        # The series go to Rerun in batches (RigViewLogger): this bounds how long a sample waits.
+        node.create_timer(p["series_flush_s"], self.logger.send_series)
         if p["stats_period_s"] > 0:
             node.create_timer(p["stats_period_s"], self.log_stats)
         node.logger.info("view: %s", where)
@@ -112,6 +120,7 @@ class View:
 
     def close(self) -> None:
         self.log_stats()
+        self.logger.send_series()
         close_recording(self.rec)
 
 

@@ -136,6 +136,7 @@ def view_bag(
                     errors += 1
                     if errors <= 20:
                         rec.log("/events/view", rr.TextLog(f"{conn.topic}: {exc}", level="WARN"))
+        view.send_series()
     finally:
         close_recording(rec)
     return Path(rrd_path) if rrd_path else None
