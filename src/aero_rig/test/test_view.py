@@ -391,6 +391,26 @@ def test_series_go_in_batches_at_their_stamps_and_none_is_held_back(
     np.testing.assert_allclose(values, [alpha_deg(k) for k in range(7)], atol=1e-9)
 
 
+def test_tap_samples_are_deserialized_only_when_logged(tmp_path: Path) -> None:
+    """The view reads /pressure/taps serialized (a raw subscription, the bag's bytes) and
+    deserializes only the samples it logs, every taps_decimation-th: bytes in between are
+    counted, never read; a logged sample that is not a PointCloud2 is a ValueError naming the
+    topic, and counted."""
+    rec, _ = rig_view.open_recording("test_view", "save", tmp_path / "taps.rrd")
+    logger = rig_view.RigViewLogger(rec, taps_decimation=10)
+    clouds = [serialize(m) for _, t, m in messages() if t == PRESSURE_TAPS.name][:20]
+    for k, cdr in enumerate(clouds):
+        logger.on_taps_cdr(cdr if k % 10 == 0 else b"never read")
+    assert logger.counts["taps"] == 20
+    with pytest.raises(ValueError, match="/pressure/taps: not a sensor_msgs/msg/PointCloud2"):
+        logger.on_taps_cdr(b"\x00\x01")  # the 21st sample is a logged one
+    assert logger.counts["taps"] == 21
+    rig_view.close_recording(rec)
+    rows = Rrd(tmp_path / "taps.rrd").rows["/cp/taps"]
+    assert [r[rig_view.TIMELINE] for r in rows] == [stamp(0), stamp(10)]
+    assert all(len(r["Points2D:positions"]) == 49 for r in rows)
+
+
 def test_node_rejects_save_without_path_and_a_bad_mode(monkeypatch: pytest.MonkeyPatch) -> None:
     join_graph(graph_env(), monkeypatch.setenv)
     assert rig_view.main(["--ros-args", "-p", "mode:=save"]) == 2

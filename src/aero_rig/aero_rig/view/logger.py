@@ -17,8 +17,10 @@ from rig_runtime.interface import (
     EXPERIMENT_SEGMENT,
     IDENTIFICATION_MODEL,
     PITCH_JOINT,
+    PRESSURE_TAPS,
     joint_position,
 )
+from rig_runtime.messages import deserialize
 
 from .blueprint import (
     BLUE,
@@ -311,6 +313,19 @@ class RigViewLogger:
         self.rec.log(
             ENTITY["cp_taps"], rr.Points2D(np.column_stack([vx, vy]), colors=colors, radii=-3.0)
         )
+
+    def on_taps_cdr(self, cdr: bytes | memoryview) -> None:
+        """``on_taps`` of a serialized PointCloud2 (CDR, as on the wire and in a bag): only the
+        samples it logs (every ``taps_decimation``-th) are deserialized, the others counted."""
+        if self.counts["taps"] % self.taps_decimation:
+            self.counts["taps"] += 1
+            return
+        try:
+            msg = deserialize(cdr, PRESSURE_TAPS.type)
+        except Exception as exc:  # the CDR reader's struct/index errors: the input is bad
+            self.counts["taps"] += 1
+            raise ValueError(f"{PRESSURE_TAPS.name}: not a {PRESSURE_TAPS.type} ({exc})") from None
+        self.on_taps(msg)
 
     # -- events --------------------------------------------------------------------------------
 

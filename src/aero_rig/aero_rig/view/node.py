@@ -94,14 +94,23 @@ class View:
         self.errors = 0
         for topic, (type_name, handler) in TOPICS.items():
             qos, depth = self.QOS[topic]
-            node.create_subscription(
-                type_name, topic, self._guard(topic, getattr(self.logger, handler)), qos, depth
-            )
+            call = getattr(self.logger, handler)
+            raw = handler.endswith("_cdr")  # a raw subscription: (CDR bytes, receive time)
+            if raw:
+                call = self._serialized(call)
+            node.create_subscription(type_name, topic, self._guard(topic, call), qos, depth, raw)
         # The series go to Rerun in batches (RigViewLogger): this bounds how long a sample waits.
         node.create_timer(p["series_flush_s"], self.logger.send_series)
         if p["stats_period_s"] > 0:
             node.create_timer(p["stats_period_s"], self.log_stats)
         node.logger.info("view: %s", where)
+
+    @staticmethod
+    def _serialized(handler: Callable[[Any], None]) -> Callable[[Any], None]:
+        def call(sample: tuple[bytes, int]) -> None:
+            handler(sample[0])
+
+        return call
 
     def _guard(self, topic: str, handler: Callable[[Any], None]) -> Callable[[Any], None]:
         def call(msg: Any) -> None:
