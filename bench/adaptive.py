@@ -179,6 +179,21 @@ def within(
     return outside, worst
 
 
+def counted(
+    label: str,
+    values: dict[tuple[str, str], float],
+    reference: dict[tuple[str, str], tuple[float, float]],
+    spread_name: str,
+) -> dict[str, Any]:
+    """`within` of ``values`` against ``reference``, printed under ``label``: the JSON entry."""
+    off, worst = within(values, reference)
+    print(f"{label}: {len(values) - len(off)} of {len(values)} cells within {spread_name} "
+          f"(worst {worst:.2f} spreads)")  # fmt: skip
+    for line in off:
+        print(f"  outside: {line}")
+    return {"cells_outside_spread": off, "worst_difference_in_spreads": round(worst, 2)}
+
+
 def compare(fixed: Path, adaptive: Path, boot: str) -> dict[str, Any]:
     account = json.loads((adaptive / "models.json").read_text())["experiment"]
     planned = json.loads((fixed / "models.json").read_text())["experiment"]
@@ -252,48 +267,30 @@ def main() -> int:
         result["wall_s"] = walls
         if args.common_sines:
             common = on_common_sines(out / f"fixed_{seed}", out / f"adaptive_{seed}")
-            off, worst = within(common, table1(out / f"fixed_{seed}", boot))
+            spreads = table1(out / f"fixed_{seed}", boot)
             result["common_sines"] = {
-                "cells_outside_spread": off,
-                "worst_difference_in_spreads": round(worst, 2),
+                **counted(f"seed {seed}, the adaptive run's models on the fixed run's sines",
+                          common, spreads, "the fixed run's spread"),
                 "table1_adaptive": {f"{m} | {c}": round(v, 3) for (m, c), v in common.items()},
-            }
-            print(f"seed {seed}, the adaptive run's models on the fixed run's sines: "
-                  f"{len(common) - len(off)} of {len(common)} cells within the fixed run's "
-                  f"spread (worst {worst:.2f} spreads)")  # fmt: skip
-            for line in off:
-                print(f"  outside: {line}")
+            }  # fmt: skip
             # The same cells against the fixed procedure's bootstrap mean (same spread): the
             # fixed run's own cell is one draw of its procedure, the mean is what it gives on
             # other draws of the periods (a lean high, docs/design.md §7.7).
             means = procedure_means(out / f"fixed_{seed}", boot)
             if means:
-                spreads = table1(out / f"fixed_{seed}", boot)
                 reference = {k: (means[k], spreads[k][1]) for k in spreads}
-                off_mean, worst_mean = within(common, reference)
-                result["common_sines"]["against_bootstrap_mean"] = {
-                    "cells_outside_spread": off_mean,
-                    "worst_difference_in_spreads": round(worst_mean, 2),
-                }
-                print(f"seed {seed}, the same against the fixed run's bootstrap mean: "
-                      f"{len(common) - len(off_mean)} of {len(common)} cells within the spread "
-                      f"(worst {worst_mean:.2f} spreads)")  # fmt: skip
-                for line in off_mean:
-                    print(f"  outside: {line}")
+                result["common_sines"]["against_bootstrap_mean"] = counted(
+                    f"seed {seed}, the same against the fixed run's bootstrap mean",
+                    common, reference, "the spread",
+                )  # fmt: skip
                 # The rate to read that count against: the fixed run's own cells, one draw of
-                # the same procedure, against the same mean and spreads. A plan that matches
-                # the procedure misses "every cell within" about as often as this.
+                # the same procedure, against the same mean and spreads (optimistic: the cell
+                # and the mean rest on the same periods).
                 own = {k: v for k, (v, _) in spreads.items()}
-                off_own, worst_own = within(own, reference)
-                result["common_sines"]["fixed_against_its_bootstrap_mean"] = {
-                    "cells_outside_spread": off_own,
-                    "worst_difference_in_spreads": round(worst_own, 2),
-                }
-                print(f"seed {seed}, the fixed run's own cells against that mean: "
-                      f"{len(own) - len(off_own)} of {len(own)} cells within the spread "
-                      f"(worst {worst_own:.2f} spreads)")  # fmt: skip
-                for line in off_own:
-                    print(f"  outside: {line}")
+                result["common_sines"]["fixed_against_its_bootstrap_mean"] = counted(
+                    f"seed {seed}, the fixed run's own cells against that mean",
+                    own, reference, "the spread",
+                )  # fmt: skip
         results[str(seed)] = result
         print(
             f"seed {seed}: multisine {result['multisine_s']:.0f} s of "
