@@ -34,7 +34,7 @@ from rig_runtime.interface import (
 )
 
 from .logger import RigViewLogger
-from .recording import MODES, TOPICS, close_recording, open_recording
+from .recording import MODES, TOPICS, close_recording, open_recording, takes_cdr
 
 PARAMETERS = [
     Parameter("mode", "save", "where the view goes", choices=MODES),
@@ -95,7 +95,7 @@ class View:
         for topic, (type_name, handler) in TOPICS.items():
             qos, depth = self.QOS[topic]
             call = getattr(self.logger, handler)
-            raw = handler.endswith("_cdr")  # a raw subscription: (CDR bytes, receive time)
+            raw = takes_cdr(handler)  # a raw subscription: (CDR bytes, receive time)
             if raw:
                 call = self._serialized(call)
             node.create_subscription(type_name, topic, self._guard(topic, call), qos, depth, raw)

@@ -75,8 +75,8 @@ def close_recording(rec: rr.RecordingStream, timeout_s: float = 10.0) -> None:
 
 TOPICS: dict[str, tuple[str, str]] = {
     # topic: (type, handler), from the interface contract. QoS for the live node in View.QOS.
-    # A handler named *_cdr takes the serialized message: the view logs only every 10th Cp
-    # distribution, so the other tap samples are counted without being deserialized.
+    # A handler named *_cdr (takes_cdr) takes the serialized message: the view draws only
+    # every taps_decimation-th Cp distribution, the other tap samples are only counted.
     PITCH_COMMAND.name: (PITCH_COMMAND.type, "on_command"),
     PITCH_STATE.name: (PITCH_STATE.type, "on_state"),
     PRESSURE_TAPS.name: (PRESSURE_TAPS.type, "on_taps_cdr"),
@@ -85,6 +85,12 @@ TOPICS: dict[str, tuple[str, str]] = {
     IDENTIFICATION_MODEL.name: (IDENTIFICATION_MODEL.type, "on_model"),
     IDENTIFICATION_STATUS.name: (IDENTIFICATION_STATUS.type, "on_status"),
 }
+
+
+def takes_cdr(handler: str) -> bool:
+    """Whether a ``TOPICS`` handler takes the serialized message (CDR bytes): the live node
+    subscribes its topic raw, the bag replay passes the bag's bytes."""
+    return handler.endswith("_cdr")
 
 
 def _route(topic: str) -> str | None:
@@ -130,11 +136,11 @@ def view_bag(
                 if topic is not None and conn.msgtype == TOPICS[topic][0]:
                     conns.append((conn, getattr(view, TOPICS[topic][1])))
             handlers = {c.id: h for c, h in conns}
-            takes_cdr = {c.id for c, h in conns if h.__name__.endswith("_cdr")}
+            serialized = {c.id for c, h in conns if takes_cdr(h.__name__)}
             errors = 0
             for conn, _t, raw in reader.messages(connections=[c for c, _ in conns]):
                 try:
-                    if conn.id in takes_cdr:
+                    if conn.id in serialized:
                         handlers[conn.id](raw)
                     else:
                         handlers[conn.id](reader.deserialize(raw, conn.msgtype))
