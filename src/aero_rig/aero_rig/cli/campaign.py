@@ -39,6 +39,7 @@ from .common import (
     with_view,
 )
 from .monitor import CampaignMonitor
+from .progress import Progress
 
 MAX_LISTED_PROBLEMS = 40  # more are in the run's data_quality.md
 
@@ -70,7 +71,11 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--rerun", choices=VIEW_MODES, default="off", help="live Rerun view")
     p.add_argument("--graph", default=None, help="graph YAML (default aero_rig config/sim.yaml)")
     p.add_argument("--timeout", type=float, default=0.0, help="give up after S wall seconds")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress (shown as a bar on a terminal, else as a line per state or 30 s)",
+    )
     p.add_argument(
         "--adaptive",
         action="store_true",
@@ -193,8 +198,6 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
     not end by itself (a node's exit, the timeout, the signal); ``Outcome.stalled`` that the
     identifier made no progress within the liveness bound after the plan's end (liveness.py).
     """
-    from tqdm import tqdm
-
     monitor = CampaignMonitor(backend)
     stalled: str | None = None
     started = time.monotonic()
@@ -212,22 +215,18 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
     launcher.start()
     reason: str | None = None
     checked, stopped = 0.0, {}
-    progress = tqdm(total=1, unit="sample", unit_scale=True, desc="experiment", disable=quiet)
+    progress = Progress(quiet=quiet)
     try:
         while reason is None and not stopped_by:
             monitor.spin(0.2)
-            if monitor.total and progress.total != monitor.total:
-                progress.total = monitor.total
-            progress.n = monitor.k
-            progress.set_postfix_str(monitor.state or "starting")
-            progress.refresh()
+            progress.update(monitor.k, monitor.total, monitor.state)
             reason = launcher.poll()
             now = time.monotonic()
             if now - checked >= 1.0:  # the processes' states: once a second (psutil)
                 checked, stopped = now, launcher.stopped(now)
             note = monitor.liveness.silent_mid_run(now, stopped)
             if note:
-                progress.write(f"aero-rig: warning: {note}", file=sys.stderr)
+                progress.write(f"aero-rig: warning: {note}")
             if reason is None:
                 stalled = monitor.liveness.check(now, stopped)
                 reason = stalled
