@@ -24,7 +24,7 @@ def _spins(progress: Progress, clock: Clock, states: list[tuple[float, int, str]
         progress.update(k, 13_764 if k else 0, state)
 
 
-# five spins a second for a minute and a half of collecting, then a refit and the end
+# four spins a second: 4 s starting, 90 s collecting, then a refit and the end
 SPINS = [(0.25 * i, 0, "") for i in range(16)]
 SPINS += [(4 + 0.25 * i, 25 * i, "collecting") for i in range(1, 360)]
 SPINS += [(95.0, 13_764, "refitting"), (95.2, 13_764, "refitting"), (99.0, 13_764, "done")]
