@@ -11,7 +11,7 @@ STAMP  := $(VENV)/.installed
 PACKAGES := rig_runtime multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
 PKG_FILES := $(foreach p,$(PACKAGES),src/$(p)/setup.py src/$(p)/package.xml)
 
-.PHONY: test test-dds test-fast campaign lint format typecheck bench venv clean
+.PHONY: test test-fast campaign lint format typecheck bench venv clean
 
 venv: $(STAMP)
 
@@ -25,7 +25,8 @@ $(BIN)/python:
 	  echo "error: the venv has no pip (ensurepip missing): sudo apt install python3-venv"; exit 1; }
 
 # rclpy: a sourced ROS 2 Jazzy's if there is one, else the PyPI wheels where they exist
-# (CPython 3.10-3.13 on x86_64 Linux), else none and the Cyclone DDS backend (one line says so).
+# (CPython 3.10-3.13 on x86_64 Linux), else none: then only the offline verbs work (one line
+# says so, and how to get rclpy).
 $(STAMP): $(BIN)/python $(PKG_FILES) requirements-dev.txt requirements-ros.txt constraints.txt
 	$(BIN)/pip install --quiet --upgrade pip setuptools wheel
 	$(BIN)/pip install --quiet -c constraints.txt -r requirements-dev.txt \
@@ -34,9 +35,9 @@ $(STAMP): $(BIN)/python $(PKG_FILES) requirements-dev.txt requirements-ros.txt c
 	  echo "rclpy: using the sourced ROS 2 $$ROS_DISTRO"; \
 	elif $(BIN)/python -c "$$ROS_WHEELS_EXIST"; then \
 	  $(BIN)/pip install --quiet -c constraints.txt -r requirements-ros.txt && \
-	  echo "rclpy: installed from PyPI (ros-jazzy-rclpy, Fast DDS); the graph runs on rclpy"; \
+	  echo "rclpy: installed from PyPI (ros-jazzy-rclpy, Fast DDS)"; \
 	else \
-	  echo "rclpy: no PyPI wheels for this platform ($$($(BIN)/python -c "$$PLATFORM")) and no sourced ROS 2 Jazzy: the graph runs on the Cyclone DDS backend"; \
+	  echo "rclpy: no PyPI wheels for this platform ($$($(BIN)/python -c "$$PLATFORM")) and no sourced ROS 2 Jazzy: source a ROS 2 Jazzy install or use RoboStack's conda packages for the node graph; aero-rig fit, view BAG and bag work without it"; \
 	fi
 	@touch $(STAMP)
 
@@ -63,23 +64,10 @@ format: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-# The full suite: lint, types, every test (graph tests and campaigns included) on the default
-# backend (rclpy where it imports; the mixed-graph campaign puts half the nodes on the Cyclone DDS
-# backend). `make test-dds` then runs the graph suite (-m slow) again on the Cyclone DDS backend,
-# without the slow tests that use no middleware or pin the DDS backend themselves (the colcon
-# build, the in-process pipeline, the clustering ablation, the F-16 fit): they would only run
-# twice. CI (.ci/run) runs both; each prints its slowest tests.
-DDS_PASS_SKIPS := not (colcon or pipeline_inprocess or clustering_ablation or f16)
+# The full suite: lint, types, every test (graph tests and campaigns included), on rclpy.
+# CI (.ci/run) runs it once; it prints its slowest tests.
 test: lint typecheck $(ROS2_TOOLS)
 	$(BIN)/pytest --durations=25
-
-test-dds: $(STAMP) $(ROS2_TOOLS)
-	@if $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
-	  echo "== the graph suite again, on the Cyclone DDS backend"; \
-	  RIG_RUNTIME_BACKEND=dds $(BIN)/pytest --durations=15 -m slow -k "$(DDS_PASS_SKIPS)"; \
-	else \
-	  echo "rclpy does not import here: make test already ran the graph suite on the Cyclone DDS backend"; \
-	fi
 
 # Unit tests only (no node graph, no campaign, no build): under a minute.
 test-fast: $(STAMP)

@@ -6,4 +6,3 @@ import os
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ.pop("RIG_DDS_NETWORK", None)
-os.environ.pop("CYCLONEDDS_URI", None)

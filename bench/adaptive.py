@@ -1,6 +1,6 @@
 """The experiment that steers itself (issue 23): adaptive against fixed default campaigns.
 
-For each plant seed, runs ``aero-rig campaign`` (default plan, the environment's backend) once
+For each plant seed, runs ``aero-rig campaign`` (default plan) once
 with the fixed plan and once with ``--adaptive``, both with ``-p sim_wing.seed:=S -p
 sim_actuator.seed:=S``, and compares:
 

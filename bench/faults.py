@@ -1,8 +1,7 @@
 """Fault-injection benchmark: the short campaign under load and faults, with what each cost.
 
-Runs `aero-rig campaign --plan short` (the simulated process graph on the environment's
-backend: ``RIG_RUNTIME_BACKEND``, else rclpy where it imports; ``--backend dds|rclpy`` sets it)
-once idle as the reference, then once per fault:
+Runs `aero-rig campaign --plan short` (the simulated graph of rclpy node processes) once idle
+as the reference, then once per fault:
 
 - ``starved``: two busy processes per core at the stream nodes' priority (nice 5), whole run;
 - ``paused``: SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run;
@@ -12,8 +11,8 @@ once idle as the reference, then once per fault:
 - ``frozen``: the generator stopped for 35 s, longer than the simulated actuator's
   30 s stream timeout, so the actuator runs on in real time (the first wave's corruption).
 
-Past the DDS participant lease (issue 21; ``lease`` is the backend's
-rig_runtime.ros_environment.PARTICIPANT_LEASE_S: dds 10 s, rclpy 20 s):
+Past the DDS participant lease (issue 21; ``lease`` is
+rig_runtime.ros_environment.PARTICIPANT_LEASE_S, Fast DDS's 20 s):
 
 - ``identifier_paused``: the identifier stopped for lease + 5 s right after the start barrier;
 - ``sim_actuator_paused_long``, ``sim_wing_paused_long``, ``lift_paused_long``,
@@ -36,7 +35,7 @@ from the bag (campaign.json ``recovered_from_bag``), seconds from the plan's end
 "plan finished" log stamp) to the campaign's exit, whether the campaign ended by its
 ``--timeout`` (it must not), and what the fault did.
 
-    .venv/bin/python bench/faults.py [--backend dds|rclpy] [--cases starved,paused,...]
+    .venv/bin/python bench/faults.py [--cases starved,paused,...]
                                      [--timeout S]  # each campaign's --timeout, default 300
 
 Last line: JSON {case: {...}} with those figures; each campaign's output is kept as
@@ -66,7 +65,7 @@ from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import EXPERIMENT_PLAN
 from rig_runtime.launcher import Launcher, node_command
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.ros_environment import BACKEND_ENV, PARTICIPANT_LEASE_S, backend_name
+from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 from rig_runtime.testing import (
     BusyProcesses,
     finish,
@@ -81,9 +80,9 @@ from rig_runtime.testing import (
 SIM = package_share("aero_rig") / "config" / "sim.yaml"
 MEMBERS = ["sim_actuator", "sim_wing", "lift", "identifier", "recorder"]
 STREAM_NODES = ("sim_actuator", "sim_wing", "lift")
-LONG_PAUSE_PAST_LEASE_S = 5.0  # a long pause: the backend's participant lease + this
+LONG_PAUSE_PAST_LEASE_S = 5.0  # a long pause: the participant lease + this
 PLAN_FINISHED = "plan finished"
-# a node's log line: "[INFO] [<epoch s>.<fraction>] [<node>]: <message>" (both backends)
+# a node's log line: "[INFO] [<epoch s>.<fraction>] [<node>]: <message>"
 LOG_STAMP = re.compile(r"^\[[A-Z]+\] \[(\d+\.\d+)\]")
 
 # What a fault does to the run's graph, given the campaign's process; a note on what it did.
@@ -365,12 +364,6 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default=",".join(all_cases), help="comma-separated cases")
     parser.add_argument(
-        "--backend",
-        choices=("dds", "rclpy"),
-        default=None,
-        help=f"runtime backend (sets {BACKEND_ENV}; default: the environment's)",
-    )
-    parser.add_argument(
         "--timeout", type=float, default=300.0, help="each campaign's --timeout [s]"
     )
     args = parser.parse_args()
@@ -378,13 +371,10 @@ def main() -> int:
     unknown = sorted(set(cases) - set(all_cases))
     if unknown:
         parser.error(f"unknown case(s) {unknown}; known: {', '.join(all_cases)}")
-    if args.backend:
-        os.environ[BACKEND_ENV] = args.backend
-    backend = backend_name()
-    long_pause = PARTICIPANT_LEASE_S[backend] + LONG_PAUSE_PAST_LEASE_S
+    long_pause = PARTICIPANT_LEASE_S + LONG_PAUSE_PAST_LEASE_S
     root = Path(tempfile.mkdtemp(prefix="bench_faults_"))
     print(
-        f"backend {backend}: participant lease {PARTICIPANT_LEASE_S[backend]:g} s, long pauses "
+        f"rclpy: participant lease {PARTICIPANT_LEASE_S:g} s, long pauses "
         f"{long_pause:g} s, campaign timeout {args.timeout:g} s; {os.cpu_count()} cores",
         flush=True,
     )

@@ -1,6 +1,5 @@
-"""Graph benchmark: the short plan through the simulated process graph, on each backend.
+"""Graph benchmark: the short plan through the simulated process graph of rclpy nodes.
 
-Both phases run once per backend (``--backends rclpy,dds``, default both where rclpy imports):
 
 Phase 1 (throughput): the whole campaign graph (generator, sim actuator, sim wing, lift,
 identifier, recorder) runs the short plan as fast as it can (real_time_factor 0); prints the
@@ -13,20 +12,29 @@ Phase 2 (latency): the graph at real-time pace for ``--latency-seconds``; an obs
 process timestamps the arrival of each /pitch/command sample and of its /wing/coefficients
 sample (same stamp): end-to-end latency p50/p99.
 
-    .venv/bin/python bench/graph.py [--plan short] [--latency-seconds 20] [--backends rclpy,dds]
-                                    [--view]
+    .venv/bin/python bench/graph.py [--plan short] [--latency-seconds 20] [--view]
+    .venv/bin/python bench/graph.py --campaign [--before TREE]
 
-Last line: JSON {backend: {...}}, each with real_time_factor, wall_s, samples, samples_lost,
+``--campaign`` runs ``aero-rig campaign --plan default`` as a user does (asynchronous Fast DDS
+publication, no view) and splits its wall time, from the node logs, into the start (processes
+up, start barrier), streaming (barrier to the generator's plan end) and the final
+identification (plan end to the report). ``--before TREE`` first runs the same campaign with the
+code of another checkout (its ``src/*`` on PYTHONPATH, this venv), so that before and after are
+measured in one run, and compares their tables byte for byte.
+
+Last line: JSON {"rclpy": {...}} (or {"before": ..., "after": ..., "tables_identical": ...}
+with ``--campaign``), with real_time_factor, wall_s, samples, samples_lost,
 latency_p50_ms, latency_p99_ms, refit_s (list), max_refit_s, node_cpu_s, node_peak_mb,
 refit_memory_mb (per refit: identifier node, worker at the job's start, worker peak),
-identifier_mb_by_quarter, table1_sha256 (equal across backends when the tables are), and with
-``--view`` view_received.
+identifier_mb_by_quarter, table1_sha256, and with ``--view`` view_received.
 """
 
 import argparse
 import hashlib
 import json
+import os
 import re
+import subprocess
 import sys
 import tempfile
 import time
@@ -39,12 +47,10 @@ from rosbags.highlevel import AnyReader
 
 from aero_rig.cli.common import config_path, with_view
 from aero_rig.cli.monitor import CampaignMonitor
-from rig_runtime import ros_environment
 from rig_runtime.graph import load_graph
 from rig_runtime.interface import PITCH_COMMAND, WING_COEFFICIENTS
 from rig_runtime.launcher import Launcher
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.ros_environment import rclpy_available
 from rig_runtime.testing import graph_env, join_graph, unique_domain_id
 
 
@@ -83,7 +89,7 @@ def throughput(plan: str, run_dir: Path, view: bool = False) -> dict[str, Any]:
         "identifier": {"output_dir": str(run_dir), "exit_after_final": True},
     }
     launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs")
-    monitor = CampaignMonitor(ros_environment.backend_name())
+    monitor = CampaignMonitor()
     peaks: dict[str, float] = {}
     cpu: dict[str, float] = {}
     trace: dict[str, list[float]] = {}
@@ -158,7 +164,7 @@ def latency(seconds: float, run_dir: Path) -> dict[str, Any]:
     keep = {"generator", "sim_actuator", "sim_wing", "lift"}
     graph = type(graph)(graph.name, tuple(n for n in graph.nodes if n.name in keep), graph.source)
     overrides = {"generator": {"plan": "short", "real_time_factor": 1.0}}
-    node = Node("bench_latency", argv=[])  # the backend of the graph (the environment's)
+    node = Node("bench_latency", argv=[])
     sent: dict[int, int] = {}
     delays: list[float] = []
 
@@ -199,25 +205,87 @@ def main() -> int:
     parser.add_argument("--latency-seconds", type=float, default=20.0)
     parser.add_argument("--keep", default=None, help="keep the run directories here")
     parser.add_argument("--view", action="store_true", help="run the Rerun view node beside it")
-    parser.add_argument(
-        "--backends",
-        default="rclpy,dds" if rclpy_available() else "dds",
-        help="comma-separated: rclpy, dds (default: both where rclpy imports)",
-    )
+    parser.add_argument("--campaign", action="store_true", help="the default campaign's split")
+    parser.add_argument("--before", default=None, help="with --campaign: a checkout to compare")
     args = parser.parse_args()
-    results: dict[str, dict[str, Any]] = {}
-    for backend in args.backends.split(","):
-        print(f"== {backend}")
-        results[backend] = run_backend(args, backend)
-    print(json.dumps(results))
+    if args.campaign:
+        return compare_campaigns(args)
+    print(json.dumps({"rclpy": run_graph(args)}))
     return 0
 
 
-def run_backend(args: argparse.Namespace, backend: str) -> dict[str, Any]:
-    env = graph_env(unique_domain_id(), RIG_RUNTIME_BACKEND=backend)
+TABLES = ("table1_all_levels.md", "table1_all_levels.csv", "table1_level1.md",
+          "table1_level1.csv", "clustering.md", "data_quality.md")  # fmt: skip
+LOG_EPOCH = re.compile(r"^\[\w+\] \[(\d+\.\d+)\]")
+
+
+def _epoch_of(log: Path, text: str) -> float:
+    """The stamp of the first line of a node log that contains ``text``."""
+    for line in log.read_text(errors="replace").splitlines():
+        match = LOG_EPOCH.match(line)
+        if match and text in line:
+            return float(match[1])
+    raise RuntimeError(f"{log}: no line with {text!r}")
+
+
+def campaign_split(run_dir: Path, started: float, ended: float) -> dict[str, Any]:
+    """Wall time of a finished campaign run, split by the generator's log lines."""
+    generator = run_dir / "logs" / "generator.log"
+    barrier = _epoch_of(generator, "start barrier passed")
+    plan_end = _epoch_of(generator, "plan finished")
+    summary = json.loads((run_dir / "campaign.json").read_text())
+    return {
+        "wall_s": round(ended - started, 1),
+        "experiment_s": summary["experiment_s"],
+        "real_time_factor": round(summary["experiment_s"] / (ended - started), 2),
+        "start_s": round(barrier - started, 1),
+        "streaming_s": round(plan_end - barrier, 1),
+        "streaming_real_time_factor": round(summary["experiment_s"] / (plan_end - barrier), 2),
+        "final_identification_s": round(ended - plan_end, 1),
+        "clean": summary["clean"],
+    }
+
+
+def run_campaign(run_dir: Path, tree: Path | None) -> dict[str, Any]:
+    """``aero-rig campaign --plan default`` (this checkout, or ``tree``'s code), timed."""
+    env = dict(os.environ)
+    if tree is not None:
+        env["PYTHONPATH"] = os.pathsep.join(str(p) for p in sorted((tree / "src").glob("*")))
+    cmd = [str(Path(sys.executable).with_name("aero-rig")), "campaign", "--plan", "default"]
+    started = time.time()
+    proc = subprocess.run([*cmd, "--out", str(run_dir), "--quiet"], env=env, text=True,
+                          capture_output=True, timeout=3600)  # fmt: skip
+    ended = time.time()
+    if proc.returncode != 0:
+        raise RuntimeError(f"campaign failed ({proc.returncode}): {proc.stderr[-3000:]}")
+    return campaign_split(run_dir, started, ended)
+
+
+def compare_campaigns(args: argparse.Namespace) -> int:
+    results: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
+        base = Path(args.keep or tmp)
+        runs = [("before", Path(args.before).resolve())] if args.before else []
+        runs.append(("after", None))  # type: ignore[arg-type]
+        for name, tree in runs:
+            print(f"== {name}: aero-rig campaign --plan default ({tree or 'this checkout'})")
+            results[name] = run_campaign(base / name, tree)
+            print(json.dumps(results[name]))
+        if args.before:
+            results["tables_identical"] = {
+                t: (base / "before" / t).read_bytes() == (base / "after" / t).read_bytes()
+                for t in TABLES
+            }
+            print(f"tables byte-identical (cmp): {results['tables_identical']}")
+    print(json.dumps(results))
+    return 0 if all(results.get("tables_identical", {"": True}).values()) else 1
+
+
+def run_graph(args: argparse.Namespace) -> dict[str, Any]:
+    env = graph_env(unique_domain_id())
     join_graph(env)
     with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
-        run_dir = Path(args.keep or tmp) / backend
+        run_dir = Path(args.keep or tmp) / "rclpy"
         figures = throughput(args.plan, run_dir / "run", args.view)
         table = figures.pop("table1_all_levels")
         figures.update(latency(args.latency_seconds, run_dir))

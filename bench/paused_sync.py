@@ -7,7 +7,7 @@ README's known limit on rclpy's synchronous publication (README, "Known limits")
 
     RMW_FASTRTPS_PUBLICATION_MODE=SYNCHRONOUS .venv/bin/python bench/paused_sync.py --runs 8
 
-Environment variables (the backend, Fast DDS's publication mode, its profile file) pass to the
+Environment variables (Fast DDS's publication mode, its profile file) pass to the
 campaign as they are. Prints one line per run (exit code, wall time, the stall line if any);
 last line JSON.
 """

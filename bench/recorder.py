@@ -5,7 +5,7 @@ A publisher in this process sends /pitch/command and /pitch/state (JointState),
 wing plant, so the pressures are as compressible as the campaign's) for ``--seconds`` of
 experiment time (samples stamped at the plan's 200 Hz), published at ``--rate-hz`` samples per
 second per topic (stream QoS: reliable, keep-all); the recorder runs as its own process
-(Cyclone DDS, loopback). Printed: MB written, the compression ratio
+(an rclpy node, loopback). Printed: MB written, the compression ratio
 (CDR payload bytes / bag bytes), the recorder's CPU seconds (user + system of the process, from
 its rusage once reaped), messages lost (published - recorded), and the same figures scaled to
 the default campaign's experiment length (``--experiment-s``, 2,442 s at 200 Hz).
@@ -113,7 +113,7 @@ def run(seconds: float, rate_hz: float, params: list[str], workdir: Path) -> dic
     bag = workdir / "bag"
     topics = "[" + ",".join(f"'{t.name}'" for t in TOPICS) + "]"
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    node = Node("bench_recorder_feed", argv=[], backend="dds")
+    node = Node("bench_recorder_feed", argv=[])
     try:
         pubs: dict[str, Any] = {
             t.name: node.create_publisher(t.type, t.name, t.qos) for t in TOPICS

@@ -1,7 +1,7 @@
-"""How reliably the real ``ros2`` tools see a running simulated graph, per backend.
+"""How reliably the real ``ros2`` tools see a running simulated graph.
 
 The sim graph (`aero-rig run sim`'s, real time, LOCALHOST discovery as simulated campaigns use
-it) runs on each backend; against it, ``ros2 node list`` (Jazzy's ros2cli, rclpy on Fast DDS)
+it) runs; against it, ``ros2 node list`` (Jazzy's ros2cli, rclpy on Fast DDS)
 is run ``--tries`` times in each of these ways:
 
 - ``daemon``: as a user types it, through the ROS 2 daemon of the domain (started once);
@@ -12,9 +12,9 @@ is run ``--tries`` times in each of these ways:
 
 A try counts if it lists all six nodes.
 
-    .venv/bin/python bench/ros2_discovery.py [--tries 10] [--backends rclpy,dds]
+    .venv/bin/python bench/ros2_discovery.py [--tries 10]
 
-Last line: JSON {backend: {way: complete tries}, "tries": N}.
+Last line: JSON {"rclpy": {way: complete tries}, "tries": N}.
 """
 
 import argparse
@@ -29,7 +29,6 @@ from typing import Any
 from aero_rig.cli.common import config_path
 from rig_runtime.graph import load_graph
 from rig_runtime.launcher import Launcher
-from rig_runtime.ros_environment import rclpy_available
 from rig_runtime.testing import graph_env, unique_domain_id
 
 ROS2 = Path(sys.executable).parent / "ros2"
@@ -43,8 +42,8 @@ def node_list(env: dict[str, str], *extra: str) -> list[str]:
     return sorted(proc.stdout.split())
 
 
-def measure(backend: str, tries: int, run_dir: Path) -> dict[str, Any]:
-    env = graph_env(unique_domain_id(), RIG_RUNTIME_BACKEND=backend)
+def measure(tries: int, run_dir: Path) -> dict[str, Any]:
+    env = graph_env(unique_domain_id())
     graph = load_graph(config_path("sim.yaml"))
     overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": "default", "real_time_factor": 1.0},
@@ -59,7 +58,7 @@ def measure(backend: str, tries: int, run_dir: Path) -> dict[str, Any]:
         deadline = time.monotonic() + 120.0
         while node_list(env) != NODES:
             if time.monotonic() > deadline or launcher.poll() is not None:
-                raise RuntimeError(f"{backend}: the graph never showed its six nodes")
+                raise RuntimeError("the graph never showed its six nodes")
         counts = {
             "daemon": sum(node_list(env) == NODES for _ in range(tries)),
             "direct_localhost": sum(node_list(env, "--no-daemon") == NODES for _ in range(tries)),
@@ -79,16 +78,14 @@ def measure(backend: str, tries: int, run_dir: Path) -> dict[str, Any]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tries", type=int, default=10)
-    parser.add_argument("--backends", default="rclpy,dds" if rclpy_available() else "dds")
     args = parser.parse_args()
     if not ROS2.exists():
         print("the ros2 tools are not in the venv: ../shared/ros2-python/install.sh .venv")
         return 2
     results: dict[str, Any] = {"tries": args.tries}
-    for backend in args.backends.split(","):
-        with tempfile.TemporaryDirectory(prefix="bench_ros2_") as tmp:
-            results[backend] = measure(backend, args.tries, Path(tmp))
-        print(f"{backend}: complete listings of {args.tries}: {results[backend]}")
+    with tempfile.TemporaryDirectory(prefix="bench_ros2_") as tmp:
+        results["rclpy"] = measure(args.tries, Path(tmp))
+    print(f"complete listings of {args.tries}: {results['rclpy']}")
     print(json.dumps(results))
     return 0
 

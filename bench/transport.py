@@ -1,9 +1,11 @@
-"""Transport benchmark: two processes on each backend, 49-tap PointCloud2 messages.
+"""Transport benchmark: two rclpy node processes, 49-tap PointCloud2 messages.
 
-Each configuration runs the same two phases: the Cyclone DDS backend (``dds``), rclpy with the
-runtime's EventsExecutor (``rclpy_events``, the default) and rclpy with its
-SingleThreadedExecutor (``rclpy_single``); rclpy configurations are skipped where rclpy does
-not import.
+Each configuration runs the same two phases: the nodes' serialized path (the runtime's
+messages as CDR bytes through rclpy's serialized publish and ``raw=True`` subscriptions) with
+rclpy's EventsExecutor (``cdr_events``, what every node uses) and with its
+SingleThreadedExecutor (``cdr_single``), and rclpy's own message classes (``native_events``:
+rclpy converts each message between Python and C on publish and on take), so the figures say
+what the serialized path saves.
 
 Round trip: this process publishes a tap cloud at 200 Hz on /bench/ping; an echo process
 republishes it on /bench/pong; the round-trip time is measured per message.
@@ -11,7 +13,7 @@ Throughput: this process publishes ``--flood`` messages as fast as the reliable 
 takes on /bench/flood (QoS "stream": reliable, keep-all, back-pressure); the echo process counts
 them and reports the count and its first/last receive times (one-way sustained rate).
 
-    .venv/bin/python bench/transport.py [--seconds 10] [--flood 20000] [--configs dds,...]
+    .venv/bin/python bench/transport.py [--seconds 10] [--flood 20000] [--configs cdr_events,...]
 
 Last line: JSON {configuration: {sent, received, lost, throughput_msg_s, rtt_p50_ms,
 rtt_p99_ms, ...}}.
@@ -28,18 +30,43 @@ from typing import Any
 import numpy as np
 
 from rig_runtime.demo_nodes import make_message
-from rig_runtime.node import Node
-from rig_runtime.ros_environment import rclpy_available
+from rig_runtime.messages import serialize
+from rig_runtime.node import Node, message_class
+from rig_runtime.qos import PROFILES, to_rclpy_qos
 from rig_runtime.testing import graph_env, join_graph, unique_domain_id
 
 CLOUD = "sensor_msgs/msg/PointCloud2"
 RESULT = "std_msgs/msg/String"
+MESSAGES_ENV = "BENCH_MESSAGES"  # "cdr" (the runtime's path) or "native" (rclpy's classes)
+
+
+def _native() -> bool:
+    return os.environ.get(MESSAGES_ENV, "cdr") == "native"
+
+
+def _cloud_type() -> Any:
+    """The tap cloud's type as the configuration's endpoints take it."""
+    return message_class(CLOUD) if _native() else CLOUD
+
+
+def _stream() -> Any:
+    return to_rclpy_qos(PROFILES["stream"]) if _native() else "stream"
+
+
+def _cloud(node: Node, seq: int) -> Any:
+    """A tap cloud; in native mode as rclpy's message (converted before any timing)."""
+    msg = make_message(node, "taps", seq)
+    if not _native():
+        return msg
+    from rclpy.serialization import deserialize_message
+
+    return deserialize_message(serialize(msg), message_class(CLOUD))
 
 
 def echo_main() -> int:
     node = Node("bench_echo", argv=[])
-    pong = node.create_publisher(CLOUD, "/bench/pong", qos="stream")
-    result = node.create_publisher(RESULT, "/bench/result", qos="latched")
+    pong = node.create_publisher(_cloud_type(), "/bench/pong", _stream())
+    result = node.create_publisher(RESULT, "/bench/result", qos_profile="latched")
     state = {"count": 0, "first": 0, "last": 0}
 
     def on_ping(msg: object) -> None:
@@ -54,8 +81,8 @@ def echo_main() -> int:
     def report() -> None:
         result.publish(node.new_message(RESULT, data=json.dumps(state)))
 
-    node.create_subscription(CLOUD, "/bench/ping", on_ping, qos="stream")
-    node.create_subscription(CLOUD, "/bench/flood", on_flood, qos="stream")
+    node.create_subscription(_cloud_type(), "/bench/ping", on_ping, _stream())
+    node.create_subscription(_cloud_type(), "/bench/flood", on_flood, _stream())
     node.create_timer(0.2, report)
     try:
         node.spin()
@@ -67,9 +94,9 @@ def echo_main() -> int:
 
 
 CONFIGS = {
-    "dds": {"RIG_RUNTIME_BACKEND": "dds"},
-    "rclpy_events": {"RIG_RUNTIME_BACKEND": "rclpy", "RIG_RCLPY_EXECUTOR": "events"},
-    "rclpy_single": {"RIG_RUNTIME_BACKEND": "rclpy", "RIG_RCLPY_EXECUTOR": "single"},
+    "cdr_events": {MESSAGES_ENV: "cdr", "RIG_RCLPY_EXECUTOR": "events"},
+    "cdr_single": {MESSAGES_ENV: "cdr", "RIG_RCLPY_EXECUTOR": "single"},
+    "native_events": {MESSAGES_ENV: "native", "RIG_RCLPY_EXECUTOR": "events"},
 }
 
 
@@ -87,9 +114,6 @@ def main() -> int:
     results: dict[str, dict[str, Any]] = {}
     ok = True
     for name in args.configs.split(","):
-        if name.startswith("rclpy") and not rclpy_available():
-            print(f"== {name}: skipped (rclpy does not import)")
-            continue
         print(f"== {name}")
         figures = measure(args, CONFIGS[name])
         ok = ok and figures["lost"] == 0
@@ -105,8 +129,8 @@ def measure(args: argparse.Namespace, config: dict[str, str]) -> dict[str, Any]:
     echo = subprocess.Popen([sys.executable, __file__, "--echo"], env=env)
     try:
         node = Node("bench_ping", argv=[])
-        ping = node.create_publisher(CLOUD, "/bench/ping", qos="stream")
-        flood = node.create_publisher(CLOUD, "/bench/flood", qos="stream")
+        ping = node.create_publisher(_cloud_type(), "/bench/ping", _stream())
+        flood = node.create_publisher(_cloud_type(), "/bench/flood", _stream())
         sent_at: dict[int, int] = {}
         rtts: list[float] = []
         latest: dict[str, Any] = {}
@@ -120,8 +144,8 @@ def measure(args: argparse.Namespace, config: dict[str, str]) -> dict[str, Any]:
         def on_result(msg: object) -> None:
             latest.update(json.loads(msg.data))  # type: ignore[attr-defined]
 
-        node.create_subscription(CLOUD, "/bench/pong", on_pong, qos="stream")
-        node.create_subscription(RESULT, "/bench/result", on_result, qos="latched")
+        node.create_subscription(_cloud_type(), "/bench/pong", on_pong, _stream())
+        node.create_subscription(RESULT, "/bench/result", on_result, qos_profile="latched")
         if not node.spin_until(
             lambda: bool(ping.subscription_count() and flood.subscription_count() and latest), 30
         ):
@@ -138,14 +162,14 @@ def measure(args: argparse.Namespace, config: dict[str, str]) -> dict[str, Any]:
                 return time.perf_counter() >= target
 
             node.spin_until(due, 1.0)
-            msg = make_message(node, "taps", k)
+            msg = _cloud(node, k)
             sent_at[k] = time.perf_counter_ns()
             ping.publish(msg)
         node.spin_until(lambda: not sent_at, 5.0)
         pings_lost = len(sent_at)
 
         # Phase 2: sustained reliable throughput, one way.
-        msgs = [make_message(node, "taps", k) for k in range(min(args.flood, 1000))]
+        msgs = [_cloud(node, k) for k in range(min(args.flood, 1000))]
         t_start = time.perf_counter()
         for k in range(args.flood):
             flood.publish(msgs[k % len(msgs)])

@@ -1,4 +1,4 @@
-"""The tests of this directory run the node graph (processes talking ROS 2 over Cyclone DDS),
+"""The tests of this directory run the node graph (rclpy node processes over Fast DDS),
 whole campaigns, the identification pipeline on a simulated campaign, or a colcon build: all
 are marked ``slow``. ``make test-fast`` (``pytest -m "not slow"``) leaves them out; ``make
 test`` runs them.

@@ -13,23 +13,23 @@ from multisine_gen.plan import ExperimentPlan
 from rig_runtime.barrier import ReadinessReport
 from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.node import Node, Subscription
+from rig_runtime.node import CdrSubscription, Node
 from rig_runtime.testing import finish, node_process, pause, start_session, wait_for
 
 
 class Observer:
-    """In-process subscriber (on the run's backend) keeping (stamp_ns, values) per topic."""
+    """In-process subscriber (an rclpy node) keeping (stamp_ns, values) per topic."""
 
     def __init__(self, topics: dict[str, tuple[str, str]]) -> None:
         self.node = Node("test_observer", argv=[])
         self.data: dict[str, list[tuple[int, Any]]] = defaultdict(list)
-        self.subs: list[Subscription] = []
+        self.subs: list[CdrSubscription] = []
         for topic, (type_name, qos) in topics.items():
 
             def store(msg: Any, topic: str = topic) -> None:
                 self._store(topic, msg)
 
-            sub = self.node.create_subscription(type_name, topic, store, qos=qos)
+            sub = self.node.create_subscription(type_name, topic, store, qos_profile=qos)
             self.subs.append(sub)
 
     def _store(self, topic: str, msg: Any) -> None:

@@ -1,4 +1,4 @@
-"""The whole campaign graph as processes on DDS, the offline fit, and faults: the short plan's
+"""The whole campaign graph as rclpy node processes, the offline fit, and faults: the short plan's
 identification; the small plan (conftest.small_plan) where a run must lose nothing and give
 the idle run's tables under load, on a mixed graph or after the identifier's kill."""
 
@@ -175,15 +175,11 @@ def test_campaign_ends_by_itself_with_report(campaign) -> None:
     for name in ("models.json", "table1_all_levels.md", "table1_level1.csv", "campaign.json"):
         assert (run / name).exists(), name
     assert list(run.glob("frf_*.png")) and list(run.glob("cl_alpha_*.png"))
-    # Every node on rclpy and as fast as the graph goes: Fast DDS publishes asynchronously
-    # (a third faster); on the DDS backend there is no Fast DDS writer.
+    # As fast as the graph goes: Fast DDS publishes asynchronously (a third faster).
     summary = json.loads((run / "campaign.json").read_text())
-    if graph_env()["RIG_RUNTIME_BACKEND"] == "rclpy":
-        assert summary["fastdds_publication"] == "ASYNCHRONOUS"
-        assert "publishes asynchronously" in proc.stderr
-        assert "ASYNCHRONOUS publication" in (run / "logs" / "sim_wing.log").read_text()
-    else:
-        assert summary["fastdds_publication"] is None
+    assert summary["fastdds_publication"] == "ASYNCHRONOUS"
+    assert "publishes asynchronously" in proc.stderr
+    assert "ASYNCHRONOUS publication" in (run / "logs" / "sim_wing.log").read_text()
     # Stopped with the graph, the recorder closed the bag once the publishers had left, not on
     # its drain timeout (which would mean it waited for itself or for a node that hung).
     assert "still published" not in (run / "logs" / "recorder.log").read_text()
@@ -195,7 +191,7 @@ def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
     with AnyReader([run / "bag"]) as reader:
         topics = {c.topic for c in reader.connections}
         # /experiment/control has a writer only in an adaptive run (its own test checks it);
-        # the recorder learns a topic's type and QoS from its writers (both backends).
+        # the recorder learns a topic's type and QoS from its writers.
         assert {t.name for t in RECORDED_TOPICS} - {EXPERIMENT_CONTROL.name} <= topics
         conns = [
             c
@@ -298,51 +294,13 @@ def test_starved_campaign_is_lossless_and_gives_the_same_table(
     _assert_lossless_and_identical(run, small_campaign[0])
 
 
-# A mixed graph (docs/design.md §3.1): the plant and the generator on the other backend than the
-# rest, as a lab whose rig PC runs a ROS 2 install and whose laptop runs the venv.
-OTHER_BACKEND = {"rclpy": "dds", "dds": "rclpy"}
-MIXED_NODES = ("generator", "sim_actuator", "sim_wing")
-
-
-def test_mixed_graph_gives_the_same_tables(
-    small_plan: Path, small_campaign, tmp_path: Path
-) -> None:
-    """Half the nodes on rclpy (Fast DDS), half on the Cyclone DDS backend: lossless, and the
-    tables and the data-quality account byte-identical to the one-backend campaign."""
-    env = graph_env()
-    try:
-        import rclpy  # noqa: F401
-    except ImportError:
-        pytest.skip("rclpy is not installed: no second backend to mix with")
-    other = OTHER_BACKEND[env["RIG_RUNTIME_BACKEND"]]
-    run = tmp_path / "run"
-    mixed = [f"--node-backend={name}={other}" for name in MIXED_NODES]
-    proc = _aero_rig(
-        *("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet", *mixed),
-        *TIMEOUT_600,
-        env=env,
-        timeout=700,
-    )
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    _assert_lossless_and_identical(run, small_campaign[0])
-    for name in ("data_quality.md", "clustering.md"):
-        assert (run / name).read_bytes() == (small_campaign[0] / name).read_bytes(), name
-    for name in MIXED_NODES:  # each node ran where it was told
-        assert f"on {other}" in (run / "logs" / f"{name}.log").read_text(), name
-    # Fast DDS writers with Cyclone DDS readers: rmw_fastrtps's synchronous default, since
-    # asynchronous publication loses the stream's first samples there (docs/design.md §3.5).
-    summary = json.loads((run / "campaign.json").read_text())
-    assert summary["fastdds_publication"] == "SYNCHRONOUS"
-    assert "publishes asynchronously" not in proc.stderr
-
-
 @pytest.mark.timeout(900)
 def test_nodes_paused_in_turn_lose_nothing(
     small_plan: Path, small_campaign, tmp_path: Path
 ) -> None:
     """SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run: the credit stalls the
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed.
-    On both backends (README, Known limits: what is known of pauses on rclpy)."""
+    (README, Known limits: what is known of pauses on rclpy)."""
     run = tmp_path / "run"
     args = ("--plan", str(small_plan), *WING, "--quiet", *TIMEOUT_600)
     code, out, err, paused = campaign_paused_in_turn(args, run, graph_env())
@@ -390,16 +348,15 @@ def test_identifier_paused_past_the_lease_is_recovered_from_the_bag(
     barrier: the writers drop it and what it did not take. The campaign does not wait for
     ever: the identifier stalls or finishes short of samples, the final identification is
     recovered from the bag, exit 0, Table 1 byte-identical to the idle run (issue 21).
-    The small plan at twice real time (34 s) outlasts the pause (25 s on rclpy, 15 s on
-    Cyclone DDS), so the identifier runs again before the plan's end, as on the short plan."""
-    backend = graph_env()["RIG_RUNTIME_BACKEND"]
+    The small plan at twice real time (34 s) outlasts the pause (25 s), so the identifier
+    runs again before the plan's end, as on the short plan."""
     run = tmp_path / "run"
     code, out, err = _campaign_with_fault(
         run,
         "generator",
         "start barrier passed",
         "identifier",
-        lambda target: pause(target, PARTICIPANT_LEASE_S[backend] + 5.0),
+        lambda target: pause(target, PARTICIPANT_LEASE_S + 5.0),
         *WING,
         *("--real-time-factor", "2"),
         plan=str(small_plan),
@@ -416,7 +373,6 @@ def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_i
     campaign ends at its stall bound (lease + 2 status periods, not its timeout), names the
     stall and the stopped process, fits what the bag holds and exits 3; no process is left
     (the stop resumes the stopped node so that it handles its SIGINT)."""
-    backend = graph_env()["RIG_RUNTIME_BACKEND"]
     run = tmp_path / "run"
     stopped: list[tuple[float, list[Any]]] = []
 
@@ -430,7 +386,7 @@ def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_i
     )
     ended_after = time.monotonic() - stopped[0][0]
     assert code == 3, out[-3000:] + err[-3000:]
-    bound = PARTICIPANT_LEASE_S[backend] + 2.0
+    bound = PARTICIPANT_LEASE_S + 2.0
     assert "stream stalled before the plan's end" in err and "timeout after" not in err
     assert re.search(r"stopped \(SIGSTOP, job control or a debugger\): lift \(\d+ s\)", err), err
     assert bound <= ended_after, ended_after  # never before the bound (the bench times the rest)

@@ -1,6 +1,6 @@
 """Fault injection on the campaign graph (issue: trust under load and faults).
 
-Each case runs the real process graph on Cyclone DDS with a small plan (one level, two
+Each case runs the real process graph on rclpy with a small plan (one level, two
 realizations of 2 periods, one sine: 69 s of experiment; conftest.small_plan) and checks the
 outcome a user must see. The starved, mixed and paused runs, which must give the idle run's
 Table 1 byte for byte, are in test_campaign.py; bench/faults.py runs every case on the short

@@ -206,7 +206,7 @@ def test_identifier_names_a_hole_in_the_plan_index_at_once(campaign, monkeypatch
 
     join_graph(graph_env(), monkeypatch.setenv)
     plan, stamps, u, _ = campaign
-    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "use_worker:=false"], backend="dds")
+    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "use_worker:=false"])
     ident = Identifier(node)
     statuses: list[dict[str, str]] = []
     ident.status_pub.publish = lambda msg: statuses.append(  # type: ignore[method-assign]
@@ -236,9 +236,7 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     from rig_runtime.testing import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
-    node = Node(
-        "identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3", *NO_SCAN], backend="dds"
-    )
+    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3", *NO_SCAN])
     ident = Identifier(node)
     try:
         ident.assembler = _assemble(campaign)
@@ -282,7 +280,7 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
 
     join_graph(graph_env(), monkeypatch.setenv)
     args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false", *NO_SCAN]
-    node = Node("identifier", PARAMETERS, args, backend="dds")
+    node = Node("identifier", PARAMETERS, args)
     ident = Identifier(node)
     try:
         plan, stamps = campaign[0], campaign[1]

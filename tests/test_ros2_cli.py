@@ -1,10 +1,9 @@
-"""The simulated graph seen with the real ``ros2`` command (ros2cli, Jazzy), on both backends.
+"""The simulated graph seen with the real ``ros2`` command (ros2cli, Jazzy).
 
 The tools come from ``../shared/ros2-python`` (``make test`` installs them into the venv);
 without them these tests skip with one line. The graph is `aero-rig run sim`'s, in real time
 (``real_time_factor`` 1), on this machine only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, as
-every test); the ros2 commands run on rclpy with Fast DDS, so against the DDS backend this is
-also a Cyclone DDS / Fast DDS interoperability check.
+every test).
 """
 
 import re
@@ -51,9 +50,9 @@ class RunningGraph:
 
 @pytest.fixture(scope="module")
 def graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningGraph]:
-    """The sim graph on this run's backend (make test runs the graph suite on both)."""
+    """The sim graph, as rclpy node processes."""
     env = graph_env()
-    tmp = tmp_path_factory.mktemp(f"ros2cli_{env['RIG_RUNTIME_BACKEND']}")
+    tmp = tmp_path_factory.mktemp("ros2cli")
     sim = load_graph(package_share("aero_rig") / "config" / "sim.yaml")
     overrides: dict[str, dict[str, Any]] = {
         "generator": {"plan": "default", "real_time_factor": 1.0, "start_timeout_s": 120.0},
@@ -152,8 +151,6 @@ def test_topic_echo_once(graph: RunningGraph) -> None:
 
 
 def test_param_list_get_describe_set(graph: RunningGraph) -> None:
-    if graph.env["RIG_RUNTIME_BACKEND"] != "rclpy":
-        pytest.skip("parameter services are rclpy's (the DDS backend has none)")
     listed = graph.ros2("param", "list", "/generator")
     for name in ("plan", "real_time_factor", "max_deg", "barrier_nodes"):
         assert f"  {name}\n" in listed, listed

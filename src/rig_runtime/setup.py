@@ -18,7 +18,6 @@ setup(
     install_requires=[
         "numpy>=1.26",
         "pyyaml>=6",
-        "cyclonedds>=0.10.5",
         "rosbags>=0.10",
         "mcap>=1.2",
         "zstandard>=0.22",

@@ -413,8 +413,10 @@ def test_tap_samples_are_deserialized_only_when_logged(tmp_path: Path) -> None:
 
 def test_node_rejects_save_without_path_and_a_bad_mode(monkeypatch: pytest.MonkeyPatch) -> None:
     join_graph(graph_env(), monkeypatch.setenv)
-    assert rig_view.main(["--ros-args", "-p", "mode:=save"]) == 2
-    assert rig_view.main(["--ros-args", "-p", "mode:=movie"]) == 2
+    from aero_rig.view.node import main as view_main
+
+    assert view_main(["--ros-args", "-p", "mode:=save"]) == 2
+    assert view_main(["--ros-args", "-p", "mode:=movie"]) == 2
 
 
 def test_view_node_records_what_it_receives_over_dds(
@@ -432,10 +434,7 @@ def test_view_node_records_what_it_receives_over_dds(
         IDENTIFICATION_MODEL.name: ("std_msgs/msg/String", "latched"),
         IDENTIFICATION_STATUS.name: ("diagnostic_msgs/msg/DiagnosticArray", "latched"),
     }
-    # The view runs on the Cyclone DDS backend (rerun needs numpy 2; docs/design.md §3.9); so
-    # does this publisher: a burst from a Fast DDS writer to a best-effort Cyclone reader loses
-    # samples in the loopback socket buffers (3 of 4 runs lost 10-30 of 200 on an idle machine).
-    node = Node("test_view_publisher", argv=[], backend="dds")
+    node = Node("test_view_publisher", argv=[])
     try:
         pubs = {t: node.create_publisher(ty, t, qos) for t, (ty, qos) in topics.items()}
         # Published before the view exists: the latched model must still reach it.

@@ -4,7 +4,7 @@
   (``exec_depend``), so colcon's build order and the import graph are the same graph, and no
   package imports upward.
 - Algorithm modules (identification, excitation, plant) never import a middleware: rclpy,
-  Cyclone DDS, or the parts of rig_runtime that load one. Only node shells (``*_node.py``) and
+  or the parts of rig_runtime that load it. Only node shells (``*_node.py``) and
   the runtime itself may.
 - The interface contract and the graph model load no middleware, so the ROS launch files can
   use them (checked in a fresh interpreter).
@@ -21,7 +21,7 @@ import pytest
 SRC = Path(__file__).resolve().parents[2]
 PACKAGES = sorted(p.parent.name for p in SRC.glob("*/package.xml"))
 # Modules that bring up a middleware when imported (directly or through what they import).
-MIDDLEWARE = ("rclpy", "cyclonedds", "rig_runtime.node", "rig_runtime.dds_backend")
+MIDDLEWARE = ("rclpy", "rig_runtime.node")
 ALGORITHM_PACKAGES = ("multisine_gen", "wing_sim", "aero_identification")
 
 
@@ -88,7 +88,7 @@ def test_algorithm_modules_import_no_middleware(package: str) -> None:
 def test_the_contract_and_the_graph_model_load_no_middleware() -> None:
     code = (
         "import sys, rig_runtime.interface, rig_runtime.graph\n"
-        "heavy = ('rclpy', 'cyclonedds', 'rosbags', 'numpy', 'rerun')\n"
+        "heavy = ('rclpy', 'rosbags', 'numpy', 'rerun')\n"
         "bad = sorted(m for m in sys.modules if m.split('.')[0] in heavy)\n"
         "print(bad); sys.exit(1 if bad else 0)\n"
     )

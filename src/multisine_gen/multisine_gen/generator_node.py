@@ -58,7 +58,7 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
     ActuatorLimits,
 )
-from rig_runtime.ros_environment import participant_lease_s
+from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
 from .campaigns import default_plan, short_plan
 from .pacing import StreamPacer
@@ -160,7 +160,7 @@ class Generator:
         # holds now, and since when.
         self.judged: set[int] = set()
         self.hold_since: float | None = None
-        self.hold_s = participant_lease_s(node.backend_name)
+        self.hold_s = PARTICIPANT_LEASE_S
         self.cmd_pub = node.create_publisher(
             PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )

@@ -35,7 +35,6 @@ class _Endpoint:
 class _Node:
     """What Generator uses of rig_runtime.Node, recorded."""
 
-    backend_name = "dds"
     fq_name = "/generator"
 
     def __init__(self, **params: Any) -> None:

@@ -35,10 +35,9 @@ class Endpoint:
 
     topic: str
     kind: str  # "writer" | "reader"
-    gid: str
+    gid: str  # a name unique in the graph: "<node>#writer<i>"
     reliable: bool = True
     transient_local: bool = False
-    matched: tuple[str, ...] | None = None  # GIDs of the matched remote endpoints (None: unknown)
     matched_count: int = 0
 
     def to_dict(self) -> dict[str, object]:
@@ -48,20 +47,17 @@ class Endpoint:
             "gid": self.gid,
             "reliable": self.reliable,
             "transient_local": self.transient_local,
-            "matched": None if self.matched is None else list(self.matched),
             "matched_count": self.matched_count,
         }
 
     @classmethod
     def from_dict(cls, d: dict[str, object]) -> "Endpoint":
-        matched = d.get("matched")
         return cls(
             topic=str(d["topic"]),
             kind=str(d["kind"]),
             gid=str(d["gid"]),
             reliable=bool(d.get("reliable", True)),
             transient_local=bool(d.get("transient_local", False)),
-            matched=None if matched is None else tuple(str(g) for g in matched),  # type: ignore[attr-defined]
             matched_count=int(d.get("matched_count", 0)),  # type: ignore[call-overload]
         )
 
@@ -175,21 +171,8 @@ def _link_problems(reports: Iterable[ReadinessReport]) -> list[str]:
             owner[e.gid] = report.node
             (writers if e.kind == "writer" else readers).setdefault(e.topic, []).append(e)
     problems: list[str] = []
+    # Each endpoint must have matched every compatible member endpoint on the other side.
     for topic in sorted(set(writers) | set(readers)):
-        for w in writers.get(topic, []):
-            for r in readers.get(topic, []):
-                if not compatible(w, r):
-                    continue
-                for side, other in ((w, r), (r, w)):
-                    # By GID where both ends are named (the DDS backend names its endpoints
-                    # and what they matched; rclpy does neither: counted below).
-                    named = side.matched is not None and other.matched is not None
-                    if named and other.gid not in (side.matched or ()):
-                        problems.append(
-                            f"{owner[side.gid]}: its {side.kind} of {topic} has not matched "
-                            f"{owner[other.gid]}'s {other.kind} yet"
-                        )
-        # Counts where either end cannot be named (rclpy, or a mixed graph).
         for side_list, other_list in (
             (writers.get(topic, []), readers.get(topic, [])),
             (readers.get(topic, []), writers.get(topic, [])),
@@ -200,8 +183,6 @@ def _link_problems(reports: Iterable[ReadinessReport]) -> list[str]:
                     for o in other_list
                     if (compatible(e, o) if e.kind == "writer" else compatible(o, e))
                 ]
-                if e.matched is not None and all(o.matched is not None for o in others):
-                    continue  # every pair checked by GID above
                 if e.matched_count < len(others):
                     problems.append(
                         f"{owner[e.gid]}: its {e.kind} of {topic} has matched "

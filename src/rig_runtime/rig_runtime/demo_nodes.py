@@ -85,7 +85,7 @@ class Talker:
         p = node.params
         self.kind = p["message"]
         type_name = MESSAGE_TYPES[self.kind]
-        self.pub = node.create_publisher(type_name, p["topic"], qos=p["qos"])
+        self.pub = node.create_publisher(type_name, p["topic"], qos_profile=p["qos"])
         self.sent = 0
         self.matched_at: float | None = None
         self.done_at: float | None = None
@@ -130,7 +130,7 @@ class Listener:
         self.last = -1
         self.first_ns: int | None = None
         self.last_ns = 0
-        node.create_subscription(type_name, p["topic"], self.on_message, qos=p["qos"])
+        node.create_subscription(type_name, p["topic"], self.on_message, qos_profile=p["qos"])
 
     def on_message(self, msg: Any) -> None:
         seq = sequence_number(self.kind, msg)

@@ -17,8 +17,6 @@ pyyaml and the standard library, so a ``ros2 launch`` process can use it::
         stops_graph: false            # true: when it exits (even with 0), the graph stops
         nice: 0                       # lower the CPU priority by 0..19, as `nice -n`
         barrier: member               # start barrier (barrier.py): lead | member | none
-        backend: rclpy                # optional: this node's runtime backend (rclpy | dds);
-                                      #   default: the environment's (RIG_RUNTIME_BACKEND)
 
 The start barrier: the ``lead`` node (the generator) starts the experiment only when every
 ``member`` node (the default) has reported ready and matched on /graph/ready; the lead gets
@@ -36,7 +34,6 @@ from typing import Any
 import yaml
 
 BARRIER_ROLES = ("lead", "member", "none")
-BACKENDS = ("rclpy", "dds")
 
 
 class GraphError(ValueError):
@@ -55,7 +52,6 @@ class NodeSpec:
     stops_graph: bool = False
     nice: int = 0
     barrier: str = "member"
-    backend: str = ""  # "" = the environment's; "rclpy" | "dds" for a mixed graph
 
     @property
     def fq_name(self) -> str:
@@ -179,7 +175,6 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
             "stops_graph",
             "nice",
             "barrier",
-            "backend",
         }
         if unknown:
             raise GraphError(f"{where}: unknown keys {sorted(unknown)}")
@@ -197,11 +192,6 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
             raise GraphError(
                 f"{where} ({item['name']}): 'barrier' must be one of {', '.join(BARRIER_ROLES)}"
             )
-        backend = item.get("backend", "")
-        if backend and backend not in BACKENDS:
-            raise GraphError(
-                f"{where} ({item['name']}): 'backend' must be one of {', '.join(BACKENDS)}"
-            )
         params = tuple(resolve_path(str(p), base) for p in item.get("parameters") or [])
         for p in params:
             if not p.exists():
@@ -218,7 +208,6 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
                 stops_graph=bool(item.get("stops_graph", False)),
                 nice=nice,
                 barrier=barrier,
-                backend=backend,
             )
         )
     leads = [n.name for n in nodes if n.barrier == "lead"]

@@ -30,9 +30,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .graph import BACKENDS, GraphError, GraphSpec, NodeSpec, entry_point, load_graph
-from .node import LAUNCHER_PID_ENV
-from .ros_environment import BACKEND_ENV, backend_name, participant_lease_s
+from .graph import GraphError, GraphSpec, NodeSpec, entry_point, load_graph
+from .ros_environment import (
+    LAUNCHER_PID_ENV,
+    PARTICIPANT_LEASE_S,
+    RosEnvironmentError,
+    require_rclpy,
+)
 
 
 @dataclass
@@ -111,16 +115,8 @@ class Launcher:
         overrides: Mapping[str, dict[str, Any]] | None = None,
         log_dir: Path | None = None,
         grace_s: float = 5.0,
-        backends: Mapping[str, str] | None = None,
     ) -> None:
-        """``backends``: {node name: "rclpy" | "dds"} over the graph's own ``backend`` keys
-        (a mixed graph); other nodes run on the environment's backend."""
         self.graph = graph
-        self.backends = dict(backends or {})
-        for name, backend in self.backends.items():
-            graph.node(name)  # KeyError naming the graph if there is no such node
-            if backend not in BACKENDS:
-                raise GraphError(f"backend of {name!r}: {backend!r} is not one of {BACKENDS}")
         # RIG_LAUNCHER_PID: a node whose parent is no longer this process stops (Node.spin), so
         # a launcher killed with SIGKILL leaves no graph running on.
         self.env = {**os.environ, **(env or {}), LAUNCHER_PID_ENV: str(os.getpid())}
@@ -154,13 +150,9 @@ class Launcher:
             # stops the nodes in order instead of all of them racing. The same session, though:
             # with the kernel's autogroup scheduling every session is one scheduling entity,
             # and a node's `nice` would have no effect against nodes in other sessions.
-            env = self.env
-            backend = self.backends.get(spec.name) or spec.backend
-            if backend:  # a mixed graph: this node on its own backend
-                env = {**env, BACKEND_ENV: backend}
             process = subprocess.Popen(
                 cmd,
-                env=env,
+                env=self.env,
                 stdout=stdout,
                 stderr=subprocess.STDOUT,
                 process_group=0,
@@ -199,14 +191,9 @@ class Launcher:
             return "all nodes finished"
         return None
 
-    def node_backends(self) -> dict[str, str]:
-        """{node: "rclpy" | "dds"}: the backend each node of the graph runs on."""
-        default = backend_name(dict(self.env))
-        return {s.name: self.backends.get(s.name) or s.backend or default for s in self.graph.nodes}
-
     def lease_s(self) -> float:
-        """The longest DDS participant lease among the graph's nodes' backends."""
-        return max(participant_lease_s(b) for b in self.node_backends().values())
+        """The DDS participant lease of the graph's nodes (Fast DDS's default)."""
+        return PARTICIPANT_LEASE_S
 
     def stopped(self, now: float | None = None) -> dict[str, float]:
         """{node: seconds it has been stopped} for the nodes whose process is stopped now
@@ -332,6 +319,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--grace", type=float, default=5.0, help="seconds per stop stage")
     args = parser.parse_args(argv)
+    try:
+        require_rclpy()
+    except RosEnvironmentError as exc:
+        _log(f"error: {exc}")
+        return 2
     try:
         graph = load_graph(args.graph)
         launcher = Launcher(graph, overrides=parse_overrides(args.overrides), grace_s=args.grace)

@@ -1,9 +1,9 @@
 """ROS 2 messages by type name, backed by the rosbags Jazzy typestore.
 
 One typestore (``rosbags.typesys.get_typestore(Stores.ROS2_JAZZY)``) is the single source of
-message definitions for the Cyclone DDS backend, the recorder and offline fits: messages are the
-typestore's dataclasses (numpy arrays for primitive sequences, nested dataclasses for headers),
-CDR bytes come from its ``serialize_cdr`` and type hashes from its ``hash_rihs01``.
+message definitions for the nodes' serialized endpoints, the recorder and offline fits:
+messages are the typestore's dataclasses (numpy arrays for primitive sequences, nested
+dataclasses for headers), CDR bytes come from its ``serialize_cdr``.
 """
 
 import dataclasses
@@ -12,7 +12,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Nodetype, Typestore
 
 _NUMPY_DTYPES = {
@@ -36,40 +37,10 @@ class MessageTypeError(ValueError):
     """A message type name that the Jazzy typestore does not know."""
 
 
-# rmw_dds_common's graph messages, Jazzy layout (16-byte GIDs; 24 before Iron): what the Cyclone
-# DDS backend publishes on ``ros_discovery_info`` so that ROS 2 tools see its nodes
-# (docs/design.md §3.1). The .msg text of ros2/rmw_dds_common (jazzy). rosbags' Jazzy store
-# ships the same definitions; they are registered only into a store that lacks them.
-RMW_DDS_COMMON_MSGS = {
-    "rmw_dds_common/msg/Gid": "char[16] data\n",
-    "rmw_dds_common/msg/NodeEntitiesInfo": (
-        "string<=256 node_namespace\n"
-        "string<=256 node_name\n"
-        "Gid[] reader_gid_seq\n"
-        "Gid[] writer_gid_seq\n"
-    ),
-    "rmw_dds_common/msg/ParticipantEntitiesInfo": (
-        "Gid gid\nNodeEntitiesInfo[] node_entities_info_seq\n"
-    ),
-}
-
-
-def register_missing(store: Typestore, definitions: dict[str, str]) -> None:
-    """Register ``{type name: .msg text}`` into ``store``, skipping types it already has."""
-    types: dict[str, Any] = {}
-    for name, text in definitions.items():
-        if name not in store.fielddefs:
-            types.update(get_types_from_msg(text, name))
-    if types:
-        store.register(types)
-
-
 @functools.cache
 def typestore() -> Typestore:
-    """The process-wide ROS 2 Jazzy typestore (common_interfaces and friends, rmw_dds_common)."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    register_missing(store, RMW_DDS_COMMON_MSGS)
-    return store
+    """The process-wide ROS 2 Jazzy typestore (common_interfaces and friends)."""
+    return get_typestore(Stores.ROS2_JAZZY)
 
 
 @functools.lru_cache(maxsize=1024)  # called per message: keep it a dictionary lookup
@@ -85,18 +56,6 @@ def normalize_type_name(type_name: str) -> str:
             "common_interfaces types (e.g. 'sensor_msgs/msg/JointState')"
         )
     return name
-
-
-def dds_type_name(type_name: str) -> str:
-    """DDS type name ROS 2 uses on the wire: ``sensor_msgs::msg::dds_::JointState_``."""
-    pkg, kind, name = normalize_type_name(type_name).split("/")
-    return f"{pkg}::{kind}::dds_::{name}_"
-
-
-@functools.cache
-def type_hash(type_name: str) -> str:
-    """RIHS01 type hash of a message type (REP 2011), as ROS 2 Jazzy advertises it."""
-    return typestore().hash_rihs01(normalize_type_name(type_name))
 
 
 def _default_maker(node: tuple[Any, Any]) -> Callable[[], Any]:
@@ -234,9 +193,29 @@ def serialize(msg: Any) -> bytes:
     return bytes(typestore().serialize_cdr(msg, msg.__msgtype__))
 
 
+# Trailing bytes a CDR writer may leave after the last field: Fast DDS aligns an empty float64
+# sequence at a message's end to 8 (a JointState with no efforts ends 4 bytes later than rosbags
+# counts), where rosbags accepts at most 3 (XCDR1 end padding to 4).
+MAX_TRAILING_PADDING = 7
+
+
 def deserialize(data: bytes | memoryview, type_name: str) -> Any:
-    """Inverse of :func:`serialize`."""
-    return typestore().deserialize_cdr(data, normalize_type_name(type_name))
+    """Inverse of :func:`serialize`; also reads the bytes of other CDR writers (rclpy's own
+    messages, ``ros2 topic pub``), which may end in up to 7 padding bytes."""
+    store = typestore()
+    name = normalize_type_name(type_name)
+    try:
+        return store.deserialize_cdr(data, name)
+    except SerdeError as exc:
+        if "size mismatch" not in str(exc) or bytes(data[:2]) != b"\x00\x01":
+            raise
+    msgdef = store.get_msgdef(name)
+    message, pos = msgdef.deserialize_cdr_le(data[4:], 0, msgdef.cls, store)
+    if pos + 4 + MAX_TRAILING_PADDING < len(data):
+        raise SerdeError(
+            f"CDR message size mismatch for {name!r}: {len(data) - pos - 4} bytes left"
+        )
+    return message
 
 
 def message_type_name(msg: Any) -> str:

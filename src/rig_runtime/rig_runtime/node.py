@@ -1,159 +1,272 @@
-"""The node API every node of this project is written against (docs/design.md §3).
+"""The base class of every node of this project: an rclpy node with the rig's contract
+(docs/design.md §3).
 
-A node module declares its parameters and a class that takes a :class:`Node`::
+:class:`Node` *is* an ``rclpy.node.Node``. What it adds is what ROS does not provide and
+every node of the rig needs: parameters declared once from a list of
+:class:`~rig_runtime.params.Parameter` (each an rclpy parameter with its
+``ParameterDescriptor``), the start barrier's readiness report, the anomaly log, the pause
+watch, and typed endpoints for the interface contract's topics. A node module reads::
 
     PARAMETERS = [Parameter("fs", 200.0, "sample rate [Hz]", min=1.0)]
 
     class Generator:
         def __init__(self, node: Node) -> None:
-            self.pub = node.create_publisher("sensor_msgs/msg/JointState", "/pitch/command")
+            self.pub = node.create_publisher(PITCH_COMMAND.type, PITCH_COMMAND.name, "stream")
             node.create_timer(1.0 / node.params["fs"], self.tick)
 
     def main(argv=None) -> int:
         return run_node(Generator, "generator", PARAMETERS, argv, description=__doc__)
 
-The backend is chosen once per process: rclpy when it imports (the PyPI wheels or a sourced
-ROS 2 Jazzy), the Cyclone DDS backend otherwise
-(rclpy_backend.py, dds_backend.py); ``RIG_RUNTIME_BACKEND=dds|rclpy`` overrides. Both speak
-ROS 2 on the wire.
+``create_publisher`` and ``create_subscription`` are rclpy's; given a ROS type *name* (the
+interface contract's ``Topic.type``) instead of a message class, they send and take the
+serialized CDR of the runtime's messages (rosbags dataclasses with numpy sequences,
+messages.py) through rclpy's serialized publish and ``raw=True`` subscriptions. rclpy's
+message conversion is skipped where it costs the most (bench/transport.py measures it).
+
+rclpy comes from the PyPI wheels (``pip install "ros-jazzy-rclpy[fastrtps]"
+ros-jazzy-common-interfaces``, CPython 3.10-3.13 on x86_64 Linux) or a sourced ROS 2 Jazzy.
 """
 
+import array
 import logging
 import os
 import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, overload
 
 from . import ros_environment
 from .anomaly import Anomaly, AnomalyLog
 from .barrier import Endpoint, ReadinessReport
 from .interface import EXPERIMENT_ANOMALY, GRAPH_READY
-from .names import ArgumentError, RosArgs, normalize_namespace, parse_ros_args, resolve_name
-from .params import Parameter, ParameterError, resolve_parameters
-from .qos import QosProfile, resolve_qos
+from .messages import deserialize, new_message, normalize_type_name, serialize
+from .params import Parameter, ParameterError, ParameterSet, assign, default_parameters
+from .qos import QosProfile, resolve_qos, to_rclpy_qos
+from .ros_environment import LAUNCHER_PID_ENV, ArgumentError
 
-BACKEND_ENV = ros_environment.BACKEND_ENV
-# Set by the launcher for its nodes: a node whose parent process is no longer the launcher
-# (it was killed, even with SIGKILL) stops instead of running on unattended.
-LAUNCHER_PID_ENV = "RIG_LAUNCHER_PID"
+try:
+    import rclpy
+    import rclpy.node
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+except ImportError as _exc:  # the one line every graph command prints (ros_environment)
+    raise ImportError(ros_environment.NO_RCLPY) from _exc
+
 PAUSE_WATCH_S = 1.0  # the period of every node's pause watch (start_pause_watch)
+EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
+# When a node closes, its reliable writers wait this long for their readers to acknowledge what
+# they hold: Fast DDS deletes a writer at once, and a reader that lost the end of a burst (a
+# full receive queue, a paused process) gets its repair from that writer only.
+WRITER_LINGER_S = 1.0
+# Fast DDS reads its default QoS profiles from this file when the first participant is made.
+PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
+PROFILES_FILE = Path(__file__).with_name("fastdds_profiles.xml")
+PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in that file
 
 # Exit codes: 0 ok, 2 configuration error (bad parameters/arguments), 1 runtime failure.
 EXIT_CONFIG_ERROR = 2
 
 
-class Publisher(Protocol):
+def message_class(type_name: str) -> Any:
+    """The generated rclpy message class of a ROS type name (``sensor_msgs/msg/JointState``),
+    imported from its package as ``from sensor_msgs.msg import JointState`` would."""
+    import importlib
+
+    pkg, kind, name = normalize_type_name(type_name).split("/")
+    try:
+        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+    except (ImportError, AttributeError) as exc:
+        raise ImportError(
+            f"no Python package for {type_name} ({pkg}): {ros_environment.INSTALL_RCLPY} ({exc})"
+        ) from exc
+
+
+@dataclass(eq=False)
+class CdrPublisher:
+    """An rclpy publisher of the runtime's messages: ``publish(msg)`` sends their CDR bytes."""
+
+    publisher: Any  # rclpy.publisher.Publisher
     topic: str
     type_name: str
+    profile: QosProfile
 
-    def publish(self, msg: Any) -> None: ...
+    def publish(self, msg: Any) -> None:
+        self.publish_raw(serialize(msg))
 
-    def subscription_count(self) -> int: ...
+    def publish_raw(self, data: bytes) -> None:
+        try:
+            self.publisher.publish(bytes(data))
+        except Exception as exc:  # rclpy's RCLError: say which writer and why it gave up
+            raise RuntimeError(
+                f"publishing on {self.topic} failed: a reader has not acknowledged for "
+                f"{PROFILE_BLOCKING_S} s (Fast DDS's max_blocking_time), or it is gone: {exc}"
+            ) from exc
+
+    def subscription_count(self) -> int:
+        return int(self.publisher.get_subscription_count())
 
 
-class Subscription(Protocol):
+@dataclass(eq=False)
+class CdrSubscription:
+    """An rclpy ``raw=True`` subscription delivering runtime messages (or the bytes)."""
+
+    subscription: Any  # rclpy.subscription.Subscription
     topic: str
     type_name: str
+    profile: QosProfile
 
-    def publisher_count(self) -> int: ...
-
-
-class Timer(Protocol):
-    def cancel(self) -> None: ...
+    def publisher_count(self) -> int:
+        return int(self.subscription.get_publisher_count())
 
 
-class Backend(Protocol):
-    """What a middleware must provide; see dds_backend.py and rclpy_backend.py."""
+def _descriptor(p: Parameter) -> Any:
+    """An rcl_interfaces ParameterDescriptor from a declaration (type, description, range)."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-    name: str
-
-    def create_publisher(self, topic: str, type_name: str, qos: QosProfile) -> Publisher: ...
-
-    def create_subscription(
-        self,
-        topic: str,
-        type_name: str,
-        callback: Callable[[Any], None],
-        qos: QosProfile,
-        raw: bool = False,
-    ) -> Subscription: ...
-
-    def create_timer(self, period_s: float, callback: Callable[[], None]) -> Timer: ...
-
-    def new_message(self, type_name: str, **fields: Any) -> Any: ...
-
-    def spin_once(self, timeout_s: float) -> int | None: ...
-
-    def now_ns(self) -> int: ...
-
-    def endpoints(self) -> list[Endpoint]: ...
-
-    def match_signature(self) -> tuple[object, ...]: ...
-
-    def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]: ...
-
-    def close(self) -> None: ...
+    descriptor = ParameterDescriptor(
+        name=p.name,
+        type=_parameter_type(p),
+        description=p.description,
+        additional_constraints=p.describe_range(),
+        read_only=p.read_only,
+    )
+    if p.min is not None or p.max is not None:
+        if p.value_type is float:
+            lo = -float("inf") if p.min is None else float(p.min)
+            hi = float("inf") if p.max is None else float(p.max)
+            descriptor.floating_point_range = [
+                FloatingPointRange(from_value=lo, to_value=hi, step=0.0)
+            ]
+        elif p.value_type is int:
+            lo_i = -(2**63) if p.min is None else int(p.min)
+            hi_i = 2**63 - 1 if p.max is None else int(p.max)
+            descriptor.integer_range = [IntegerRange(from_value=lo_i, to_value=hi_i, step=0)]
+    return descriptor
 
 
-def select_backend_name() -> str:
-    """``rclpy`` where it imports, else ``dds``; ``RIG_RUNTIME_BACKEND`` chooses explicitly
-    (ros_environment.backend_name; a clear error if the choice cannot be honoured)."""
-    return ros_environment.backend_name()
+def _parameter_type(p: Parameter) -> int:
+    from rcl_interfaces.msg import ParameterType
+
+    scalar = {
+        bool: ParameterType.PARAMETER_BOOL,
+        int: ParameterType.PARAMETER_INTEGER,
+        float: ParameterType.PARAMETER_DOUBLE,
+        str: ParameterType.PARAMETER_STRING,
+    }
+    arrays = {
+        bool: ParameterType.PARAMETER_BOOL_ARRAY,
+        int: ParameterType.PARAMETER_INTEGER_ARRAY,
+        float: ParameterType.PARAMETER_DOUBLE_ARRAY,
+        str: ParameterType.PARAMETER_STRING_ARRAY,
+    }
+    return int((arrays if p.is_list else scalar)[p.value_type])
 
 
-class Node:
-    """A named node with validated parameters, publishers, subscriptions and timers."""
+class _RosoutHandler(logging.Handler):
+    """Python log records -> the node's rcl logger (console and /rosout)."""
+
+    def __init__(self, rcl_logger: Any) -> None:
+        super().__init__()
+        self.rcl_logger = rcl_logger
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = self.format(record)
+            level = record.levelno
+            if level >= logging.CRITICAL:
+                self.rcl_logger.fatal(text)
+            elif level >= logging.ERROR:
+                self.rcl_logger.error(text)
+            elif level >= logging.WARNING:
+                self.rcl_logger.warning(text)
+            elif level >= logging.INFO:
+                self.rcl_logger.info(text)
+            else:
+                self.rcl_logger.debug(text)
+        except Exception:
+            self.handleError(record)
+
+
+def _events_executor(context: Any) -> Any:
+    """rclpy.experimental.EventsExecutor without its ``faulthandler.enable()``, which fails
+    where stderr has no file descriptor (pytest's capture) and is the process's business."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    executor = rclpy_implementation.EventsExecutor(context)
+    context.on_shutdown(executor.wake)  # as the wrapper does: a shutdown ends a blocked spin
+    return executor
+
+
+def _new_context() -> Any:
+    """A context per node: its own participant in the domain of this moment (tests move
+    between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself (an
+    orderly stop that lets the recorder drain), so rclpy installs no handler."""
+    domain = ros_environment.check()
+    # Writers block up to 60 s for a slow reader (fastdds_profiles.xml says why).
+    os.environ.setdefault(PROFILES_ENV, str(PROFILES_FILE))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    return context
+
+
+class Node(rclpy.node.Node):
+    """An rclpy node with validated parameters, the start barrier, anomalies and a pause watch.
+
+    Each instance owns its ``rclpy.Context`` and executor (rclpy's ``EventsExecutor``;
+    ``RIG_RCLPY_EXECUTOR=single`` for its ``SingleThreadedExecutor``).
+    """
 
     def __init__(
         self,
         name: str,
         parameters: Sequence[Parameter] = (),
         argv: Sequence[str] | None = None,
-        namespace: str = "/",
-        backend: str | None = None,
+        namespace: str | None = None,
     ) -> None:
         args = list(sys.argv[1:] if argv is None else argv)
-        backend_name = backend or ros_environment.check()
-        if backend_name == "rclpy":
-            # rcl parses --ros-args (names, remaps, -p, --params-file, --log-level) and holds
-            # the parameters, with descriptors, for `ros2 param` (rclpy_backend.py).
-            from .rclpy_backend import RclpyBackend
-
-            rclpy_backend = RclpyBackend(name, namespace, args)
-            try:
-                self.ros_args = RosArgs()
-                self.name = rclpy_backend.node_name
-                self.namespace = rclpy_backend.namespace
-                self.fq_name = _fq_name(self.namespace, self.name)
-                self.params = rclpy_backend.declare_parameters(parameters)
-            except Exception:
-                rclpy_backend.close()
-                raise
-            self.logger = _make_logger(
-                self.fq_name, rclpy_backend.log_level, rclpy_backend.log_handler()
+        choice = os.environ.get(EXECUTOR_ENV, "events").strip().lower()
+        if choice not in ("events", "single"):  # checked before anything is created
+            raise ArgumentError(f"{EXECUTOR_ENV}={choice!r}: expected 'events' or 'single'")
+        context = _new_context()
+        try:
+            # rcl parses --ros-args (names, remaps, -p, --params-file, --log-level), per node.
+            super().__init__(
+                name,
+                context=context,
+                namespace=namespace,
+                cli_args=args or None,
+                use_global_arguments=False,
+                start_parameter_services=True,
             )
-            rclpy_backend.on_parameter_change(
-                lambda n, v: self.logger.info("parameter %s set to %r", n, v)
-            )
-            self._backend: Backend = rclpy_backend
-        else:
-            ros_args = parse_ros_args(args)
-            self.ros_args = ros_args
-            self.name = ros_args.node_name or name
-            self.namespace = normalize_namespace(ros_args.namespace or namespace)
-            self.fq_name = _fq_name(self.namespace, self.name)
-            # Parameters are validated before any middleware entity exists (design.md §8).
-            self.params = resolve_parameters(
-                parameters, self.fq_name, ros_args.param_files, ros_args.overrides
-            )
-            level = ros_args.log_level or os.environ.get("RIG_LOG_LEVEL", "INFO")
-            self.logger = _make_logger(self.fq_name, logging.getLevelName(level.upper()))
-            from .dds_backend import DdsBackend
-
-            self._backend = DdsBackend(self.name, self.namespace)
+        except Exception as exc:  # rcl's argument parser: RCLError / ValueError
+            context.try_shutdown()
+            raise ArgumentError(
+                f"invalid ROS arguments {args}: {type(exc).__name__}: {exc}"
+            ) from None
+        self._rig_context = context
+        try:
+            self.name = str(self.get_name())
+            self.namespace = str(self.get_namespace())
+            self.fq_name = str(self.get_fully_qualified_name())
+            self.params = self._declare_parameters(parameters)
+        except Exception:
+            self.destroy_node()
+            context.try_shutdown()
+            raise
+        self.logger = _make_logger(self.fq_name, int(self.get_logger().get_effective_level()))
+        self.logger.addHandler(self._log_handler())
+        self._rig_executor = (
+            _events_executor(context)
+            if choice == "events"
+            else SingleThreadedExecutor(context=context)
+        )
+        self._rig_executor.add_node(self)
+        self._cdr_publishers: list[CdrPublisher] = []
+        self._cdr_subscriptions: list[CdrSubscription] = []
+        self._delivered = 0
         self.exit_code = 0
         self._shutdown_requested = False
         self._on_shutdown: list[Callable[[], None]] = []
@@ -167,90 +280,216 @@ class Node:
         self._ready_reason = ""
         self._required_inputs: list[str] = []
         self._records: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
-        self._ready_pub: Publisher | None = None
+        self._ready_pub: CdrPublisher | None = None
         self._last_report = ""
         self._last_signature: object = None
         self._anomalies: AnomalyLog | None = None
-        # Pauses past the DDS lease (start_pause_watch): how long this process did not run.
+        # Pauses past the participant lease (start_pause_watch): how long this process did not run.
         self.paused_s: list[float] = []
         self._on_paused: list[Callable[[float], None]] = []
         self._last_watch = 0.0
 
     @property
-    def backend_name(self) -> str:
-        return self._backend.name
+    def middleware_description(self) -> str:
+        """``rclpy (rmw_fastrtps_cpp)``, with rmw_fastrtps's publication mode when it was
+        chosen (``rclpy (rmw_fastrtps_cpp, ASYNCHRONOUS publication)``), for the log."""
+        from rclpy.utilities import get_rmw_implementation_identifier
 
-    @property
-    def backend_description(self) -> str:
-        """``rclpy (rmw_fastrtps_cpp)`` or ``dds (Cyclone DDS backend)``, for the log; with
-        rmw_fastrtps's publication mode when it was chosen (``rclpy (rmw_fastrtps_cpp,
-        ASYNCHRONOUS publication)``)."""
-        if self._backend.name == "rclpy":
-            from rclpy.utilities import get_rmw_implementation_identifier
+        rmw = get_rmw_implementation_identifier()
+        mode = os.environ.get(ros_environment.PUBLICATION_MODE_ENV)
+        if mode and rmw.startswith("rmw_fastrtps"):
+            return f"rclpy ({rmw}, {mode} publication)"
+        return f"rclpy ({rmw})"
 
-            rmw = get_rmw_implementation_identifier()
-            mode = os.environ.get(ros_environment.PUBLICATION_MODE_ENV)
-            if mode and rmw.startswith("rmw_fastrtps"):
-                return f"rclpy ({rmw}, {mode} publication)"
-            return f"rclpy ({rmw})"
-        return "dds (Cyclone DDS backend)"
+    # -- parameters: rclpy's, each declared once with its descriptor --------------------------
+    def _declare_parameters(self, declared: Sequence[Parameter]) -> ParameterSet:
+        """Declare every parameter with its descriptor; values from rcl's overrides
+        (``--params-file``, ``-p``) are checked by :meth:`Parameter.validate` (types, ranges,
+        choices, list elements) first, so a bad one stops the node before any publisher."""
+        from rclpy.exceptions import InvalidParameterValueException
 
-    def resolve_topic(self, topic: str) -> str:
-        """The fully qualified topic name after expansion and remapping (rcl's on rclpy)."""
-        resolve = getattr(self._backend, "resolve_topic", None)
-        if resolve is not None:
-            return str(resolve(topic))
-        return resolve_name(topic, self.namespace, self.name, self.ros_args.remaps)
+        result = default_parameters(declared)
+        for name, override in self._parameter_overrides.items():  # parsed by rcl
+            given = override.value
+            if isinstance(given, array.array):  # rclpy's numeric arrays
+                given = list(given)
+            assign(result, name, given, f"--ros-args ({name}:={given!r})")
+        for p in declared:
+            if result.sources[p.name] != "default":
+                result.sources[p.name] = "--ros-args"
+            try:
+                self._declare_one(p, result.values[p.name])
+            except InvalidParameterValueException as exc:
+                raise ParameterError(f"parameter {p.name!r}: {exc}") from None
+        self._rig_params = result
+        self.add_on_set_parameters_callback(self._set_parameters)
+        return result
+
+    def _declare_one(self, p: Parameter, value: Any) -> None:
+        from rclpy.parameter import Parameter as RclpyParameter
+
+        descriptor = _descriptor(p)
+        if not (p.is_list and not value):
+            self.declare_parameter(
+                p.name, list(value) if p.is_list else value, descriptor, ignore_override=True
+            )
+            return
+        # An empty list does not say its element type: declare the type, then set [] (rclpy
+        # refuses a set on a read-only parameter, so read-only is restored afterwards).
+        kind = RclpyParameter.Type(descriptor.type)
+        read_only, descriptor.read_only = descriptor.read_only, False
+        self.declare_parameter(p.name, kind, descriptor, ignore_override=True)
+        self.set_parameters([RclpyParameter(p.name, kind, [])])
+        self.describe_parameter(p.name).read_only = read_only
+
+    def _set_parameters(self, parameters: list[Any]) -> Any:
+        """``ros2 param set``: rclpy has already refused read-only parameters, wrong types and
+        values outside the descriptor's range; choices and element ranges are checked here."""
+        from rcl_interfaces.msg import SetParametersResult
+
+        checked: list[tuple[str, Any]] = []
+        for param in parameters:
+            declared = self._rig_params.declared.get(param.name)
+            if declared is None:
+                continue  # rclpy's own (use_sim_time)
+            try:
+                given = list(param.value) if isinstance(param.value, array.array) else param.value
+                checked.append((param.name, declared.validate(given, "ros2 param set")))
+            except ParameterError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        for name, value in checked:
+            self._rig_params.values[name] = value
+            self._rig_params.sources[name] = "ros2 param set"
+            if hasattr(self, "logger"):
+                self.logger.info("parameter %s set to %r", name, value)
+        return SetParametersResult(successful=True)
+
+    def _log_handler(self) -> logging.Handler:
+        handler = _RosoutHandler(self.get_logger())
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        return handler
+
+    # -- publishers, subscriptions, timers: rclpy's ------------------------------------------
+    @overload
+    def create_publisher(
+        self, msg_type: str, topic: str, qos_profile: str | QosProfile = ..., *,
+        depth: int | None = ..., **kwargs: Any,
+    ) -> CdrPublisher: ...  # fmt: skip
+
+    @overload
+    def create_publisher(
+        self, msg_type: type, topic: str, qos_profile: Any = ..., *,
+        depth: int | None = ..., **kwargs: Any,
+    ) -> Any: ...  # fmt: skip
 
     def create_publisher(
         self,
-        type_name: str,
+        msg_type: Any,
         topic: str,
-        qos: str | QosProfile = "default",
+        qos_profile: Any = "default",
+        *,
         depth: int | None = None,
-    ) -> Publisher:
-        return self._backend.create_publisher(
-            self.resolve_topic(topic), type_name, resolve_qos(qos, depth)
+        **kwargs: Any,
+    ) -> Any:
+        """rclpy's ``create_publisher``; with a ROS type name (``"std_msgs/msg/String"``) and a
+        named profile (qos.py) it returns a :class:`CdrPublisher` of the runtime's messages."""
+        if not isinstance(msg_type, str):
+            return super().create_publisher(msg_type, topic, qos_profile, **kwargs)
+        type_name = normalize_type_name(msg_type)
+        profile = resolve_qos(qos_profile, depth)
+        pub = super().create_publisher(
+            message_class(type_name), topic, to_rclpy_qos(profile), **kwargs
         )
+        publisher = CdrPublisher(pub, str(self.resolve_topic_name(topic)), type_name, profile)
+        self._cdr_publishers.append(publisher)
+        return publisher
+
+    @overload
+    def create_subscription(
+        self, msg_type: str, topic: str, callback: Callable[[Any], None],
+        qos_profile: str | QosProfile = ..., *, depth: int | None = ..., raw: bool = ...,
+        required: bool = ..., **kwargs: Any,
+    ) -> CdrSubscription: ...  # fmt: skip
+
+    @overload
+    def create_subscription(
+        self, msg_type: type, topic: str, callback: Callable[[Any], None],
+        qos_profile: Any = ..., *, depth: int | None = ..., raw: bool = ...,
+        required: bool = ..., **kwargs: Any,
+    ) -> Any: ...  # fmt: skip
 
     def create_subscription(
         self,
-        type_name: str,
+        msg_type: Any,
         topic: str,
         callback: Callable[[Any], None],
-        qos: str | QosProfile = "default",
+        qos_profile: Any = "default",
+        *,
         depth: int | None = None,
         raw: bool = False,
         required: bool = False,
-    ) -> Subscription:
-        """Deliver messages of ``topic`` to ``callback`` on the spin thread.
-
-        ``raw=True`` delivers ``(cdr_bytes, receive_time_ns)`` instead of a message (recorder).
-        ``required=True``: an input without which the node cannot work; the start barrier
-        waits until it has a publisher.
-        """
-        resolved = self.resolve_topic(topic)
+        **kwargs: Any,
+    ) -> Any:
+        """rclpy's ``create_subscription``; with a ROS type name it delivers the runtime's
+        messages decoded from the CDR bytes, or with ``raw=True`` ``(cdr_bytes,
+        receive_time_ns)`` (the recorder). ``required=True``: an input without which the
+        node cannot work; the start barrier waits until it has a publisher."""
+        if not isinstance(msg_type, str):
+            return super().create_subscription(
+                msg_type, topic, callback, qos_profile, raw=raw, **kwargs
+            )
+        type_name = normalize_type_name(msg_type)
+        profile = resolve_qos(qos_profile, depth)
+        resolved = str(self.resolve_topic_name(topic))
         if required:
             self._required_inputs.append(resolved)
-        return self._backend.create_subscription(
-            resolved, type_name, callback, resolve_qos(qos, depth), raw
-        )
 
-    def create_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
-        if not period_s > 0:
-            raise ValueError(f"timer period must be > 0 s, got {period_s}")
-        return self._backend.create_timer(period_s, callback)
+        def deliver(data: bytes) -> None:
+            self._delivered += 1
+            if raw:
+                callback((data, time.time_ns()))
+            else:
+                callback(deserialize(data, type_name))
+
+        sub = super().create_subscription(
+            message_class(type_name), topic, deliver, to_rclpy_qos(profile), raw=True, **kwargs
+        )
+        subscription = CdrSubscription(sub, resolved, type_name, profile)
+        self._cdr_subscriptions.append(subscription)
+        return subscription
+
+    def create_timer(self, timer_period_sec: float, callback: Any, *args: Any, **kw: Any) -> Any:
+        if not timer_period_sec > 0:
+            raise ValueError(f"timer period must be > 0 s, got {timer_period_sec}")
+        return super().create_timer(timer_period_sec, callback, *args, **kw)
 
     def new_message(self, type_name: str, **fields: Any) -> Any:
-        """A message by ROS type name, native to the backend (same attributes on both)."""
-        return self._backend.new_message(type_name, **fields)
+        """A runtime message by ROS type name (messages.py)."""
+        return new_message(type_name, **fields)
 
     def now_ns(self) -> int:
-        return self._backend.now_ns()
+        return time.time_ns()
 
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
-        """Topics seen in the graph: name -> (type name, offered QoS if known)."""
-        return self._backend.topic_types()
+        """Topics with at least one publisher: name -> (type name, QoS offered by the first).
+        A topic known only from its readers has no offered QoS yet, and a recorder that
+        guessed one could ask for reliable from a best-effort writer and never be matched."""
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
+
+        result: dict[str, tuple[str, QosProfile | None]] = {}
+        for name, types in self.get_topic_names_and_types():
+            for info in self.get_publishers_info_by_topic(name):
+                q = info.qos_profile
+                profile = QosProfile(
+                    "best_effort" if q.reliability == ReliabilityPolicy.BEST_EFFORT else "reliable",
+                    "transient_local"
+                    if q.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                    else "volatile",
+                    0 if q.history == HistoryPolicy.KEEP_ALL else int(q.depth),
+                )
+                result[name] = (types[0], profile)
+                break
+        return result
 
     # -- start barrier (barrier.py) --------------------------------------------------------
     def set_ready(self, ready: bool, reason: str = "") -> None:
@@ -267,12 +506,26 @@ class Node:
         barrier waits until it has a reader on each of them that a member publishes."""
         self._records = (tuple(topics), tuple(excluded))
 
+    def endpoints(self) -> list[Endpoint]:
+        """The runtime's readers and writers with their matched counts (rclpy does not name
+        the matched endpoints, so the start barrier compares counts)."""
+        fq = self.fq_name
+        out = [
+            _endpoint(p, "writer", f"{fq}#writer{i}", p.subscription_count())
+            for i, p in enumerate(self._cdr_publishers)
+        ]
+        out += [
+            _endpoint(s, "reader", f"{fq}#reader{i}", s.publisher_count())
+            for i, s in enumerate(self._cdr_subscriptions)
+        ]
+        return out
+
     def readiness_report(self) -> ReadinessReport:
         return ReadinessReport(
             node=self.fq_name,
             ready=self._ready,
             reason=self._ready_reason,
-            endpoints=tuple(self._backend.endpoints()),
+            endpoints=tuple(self.endpoints()),
             required_inputs=tuple(self._required_inputs),
             records=self._records[0],
             excluded=self._records[1],
@@ -280,9 +533,8 @@ class Node:
 
     def start_readiness(self, period_s: float = 0.05) -> None:
         """Publish the readiness report now and whenever it changes (run_node calls this
-        once the node is constructed). Every ``period_s`` only the matched endpoints'
-        handles are compared (cheap); the report is rebuilt when they or the node's own
-        readiness changed."""
+        once the node is constructed). Every ``period_s`` only the matched counts are
+        compared (cheap); the report is rebuilt when they or the node's own readiness changed."""
         if self._ready_pub is not None:
             return
         # The anomaly writer exists before the node reports ready, so the barrier sees it matched
@@ -294,7 +546,8 @@ class Node:
 
     def _announce(self) -> None:
         assert self._ready_pub is not None
-        signature = (self._ready, self._ready_reason, self._backend.match_signature())
+        counts = tuple(e.matched_count for e in self.endpoints())
+        signature = (self._ready, self._ready_reason, counts)
         if signature == self._last_signature:
             return
         self._last_signature = signature
@@ -303,7 +556,7 @@ class Node:
             self._last_report = text
             self._ready_pub.publish(self.new_message(GRAPH_READY.type, data=text))
 
-    # -- pauses past the DDS lease (docs/design.md §3.10) ---------------------------------
+    # -- pauses past the participant lease (docs/design.md §3.10) --------------------------
     def start_pause_watch(self) -> None:
         """Notice, on the first timer tick after it runs again, that this process did not run
         for longer than the DDS participant lease (SIGSTOP, a debugger, a suspended laptop, a
@@ -324,7 +577,7 @@ class Node:
         now = time.monotonic()
         stopped = now - self._last_watch - PAUSE_WATCH_S
         self._last_watch = now
-        lease_s = ros_environment.participant_lease_s(self.backend_name)
+        lease_s = ros_environment.PARTICIPANT_LEASE_S
         if stopped <= lease_s:
             return
         self.paused_s.append(stopped)
@@ -354,6 +607,7 @@ class Node:
             self._anomalies = AnomalyLog(self.fq_name, send)
         return self._anomalies
 
+    # -- spinning and stopping -------------------------------------------------------------
     def on_shutdown(self, callback: Callable[[], None]) -> None:
         self._on_shutdown.append(callback)
 
@@ -362,12 +616,15 @@ class Node:
             self.exit_code = exit_code
         self._shutdown_requested = True
 
-    @property
-    def shutdown_requested(self) -> bool:
-        return self._shutdown_requested
+    def spin_once(self, timeout_s: float = 0.05) -> int:
+        """Wait up to ``timeout_s`` for work and handle one ready item (a sample, a timer, a
+        service request); returns how many samples were delivered (0 or 1)."""
+        before = self._delivered
+        self._rig_executor.spin_once(timeout_sec=max(timeout_s, 0.0))
+        return self._delivered - before
 
-    def spin_once(self, timeout_s: float = 0.05) -> None:
-        self._backend.spin_once(timeout_s)
+    def wake(self) -> None:
+        self._rig_executor.wake()
 
     def spin(self) -> None:
         """Handle callbacks until a shutdown is requested (or the launcher is gone)."""
@@ -384,11 +641,10 @@ class Node:
                     self.request_shutdown(1)
             return not self._shutdown_requested
 
-        # One event per turn on both backends. rclpy's EventsExecutor.spin_until_future_complete
-        # (its own loop) never returns without a timeout in rclpy 7.1.6, and was not faster in
-        # the one measurement taken (on a machine disturbed by another process).
+        # One event per turn. rclpy's EventsExecutor.spin_until_future_complete (its own loop)
+        # never returns without a timeout in rclpy 7.1.6.
         while keep_going():
-            self._backend.spin_once(0.05)
+            self.spin_once(0.05)
 
     def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Spin until ``predicate()`` is true (returns True) or the timeout passes (False)."""
@@ -397,7 +653,7 @@ class Node:
             remaining = deadline - time.monotonic()
             if remaining <= 0 or self._shutdown_requested:
                 return predicate()
-            self._backend.spin_once(min(0.05, remaining))
+            self.spin_once(min(0.05, remaining))
         return True
 
     def drain(self, until: Callable[[], bool], timeout_s: float) -> bool:
@@ -410,11 +666,32 @@ class Node:
             done = until()
             if remaining <= 0:
                 return done
-            delivered = self._backend.spin_once(0.0 if done else min(0.05, remaining))
+            delivered = self.spin_once(0.0 if done else min(0.05, remaining))
             if done and not delivered:
                 return True
 
+    def _linger(self) -> list[str]:
+        """Wait (WRITER_LINGER_S in all) until every reliable writer's samples are
+        acknowledged; the topics of those whose samples were not."""
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + WRITER_LINGER_S
+        late = []
+        for pub in self._cdr_publishers:
+            if pub.profile.reliability != "reliable":
+                continue
+            remaining = max(deadline - time.monotonic(), 0.0)
+            try:
+                acked = pub.publisher.wait_for_all_acked(Duration(nanoseconds=int(remaining * 1e9)))
+            except Exception:  # rclpy's RCLError: the writer cannot say
+                acked = False
+            if not acked:
+                late.append(pub.topic)
+        return late
+
     def close(self) -> None:
+        """Run the shutdown callbacks, let the reliable writers linger, then destroy the node
+        and shut its context down."""
         for callback in reversed(self._on_shutdown):
             try:
                 callback()
@@ -423,30 +700,37 @@ class Node:
         self._on_shutdown.clear()
         if self._anomalies is not None:
             self._anomalies.close_all()  # an episode still open ends at its last stamp
-        self._backend.close()
+        late = self._linger()
+        if late:
+            self.logger.warning(
+                "closing with samples not acknowledged after %g s on %s: a reader is paused, "
+                "starved or gone",
+                WRITER_LINGER_S,
+                ", ".join(sorted(set(late))),
+            )
+        self._rig_executor.remove_node(self)
+        self._rig_executor.shutdown()
+        self.destroy_node()
+        self._rig_context.try_shutdown()
 
 
-def _fq_name(namespace: str, name: str) -> str:
-    prefix = "" if namespace == "/" else namespace
-    return f"{prefix}/{name}"
+def _endpoint(entity: CdrPublisher | CdrSubscription, kind: str, gid: str, count: int) -> Endpoint:
+    return Endpoint(
+        topic=entity.topic,
+        kind=kind,
+        gid=gid,
+        reliable=entity.profile.reliability == "reliable",
+        transient_local=entity.profile.durability == "transient_local",
+        matched_count=count,
+    )
 
 
-def _make_logger(
-    fq_name: str, level: int | str, handler: logging.Handler | None = None
-) -> logging.Logger:
-    """The node's Python logger. On rclpy ``handler`` hands each record to the node's rcl
-    logger (console and /rosout); otherwise records go to stderr in rcutils' console format."""
+def _make_logger(fq_name: str, level: int | str) -> logging.Logger:
+    """The node's Python logger (printf-style, as the node modules write); its records go to
+    the node's rcl logger: the console in rcutils' format and /rosout."""
     logger = logging.getLogger(f"rig{fq_name.replace('/', '.')}")
     for old in list(logger.handlers):  # a node of the same name made before in this process
         logger.removeHandler(old)
-    if handler is None:
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(
-            logging.Formatter(
-                f"[%(levelname)s] [%(created).3f] [{fq_name.lstrip('/')}]: %(message)s"
-            )
-        )
-    logger.addHandler(handler)
     logger.propagate = False
     logger.setLevel(level)
     return logger
@@ -510,7 +794,7 @@ def run_node(
             node.on_shutdown(close)
         node.start_readiness()
         node.start_pause_watch()
-        node.logger.info("running on %s", node.backend_description)
+        node.logger.info("running on %s", node.middleware_description)
         profile_dir = os.environ.get("RIG_PROFILE_DIR")
         if profile_dir:  # cProfile of the spin loop, for `python -m pstats DIR/<node>.prof`
             import cProfile

@@ -1,4 +1,7 @@
-"""Named QoS profiles shared by both backends (docs/design.md §3-§4).
+"""Named QoS profiles of the interface contract (docs/design.md §3-§4).
+
+Plain data, so that the interface contract imports without rclpy (offline fits, launch
+files); :func:`to_rclpy_qos` gives the rclpy ``QoSProfile`` a node creates its endpoints with.
 
 - ``default``: reliable, volatile, keep-last 10 (ROS 2's default profile).
 - ``sensor``: best effort, volatile, keep-last 5 (ROS 2's sensor-data profile).
@@ -74,3 +77,19 @@ def resolve_qos(qos: str | QosProfile, depth: int | None = None) -> QosProfile:
         except KeyError:
             raise ValueError(f"unknown QoS profile {qos!r}; known: {sorted(PROFILES)}") from None
     return profile if depth is None else replace(profile, depth=depth)
+
+
+def to_rclpy_qos(profile: QosProfile) -> Any:
+    """The rclpy ``QoSProfile`` of a profile (imports rclpy: graph processes only)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_ALL if profile.keep_all else HistoryPolicy.KEEP_LAST,
+        depth=max(profile.depth, 1),
+        reliability=ReliabilityPolicy.RELIABLE
+        if profile.reliability == "reliable"
+        else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL
+        if profile.durability == "transient_local"
+        else DurabilityPolicy.VOLATILE,
+    )

@@ -75,7 +75,7 @@ class Recorder:
         if not output:
             raise ValueError("parameter 'output' is required: the bag directory to create")
         self.node = node
-        self.wanted = [node.resolve_topic(t) for t in node.params["topics"]]
+        self.wanted = [node.resolve_topic_name(t) for t in node.params["topics"]]
         self.exclude = set(node.params["exclude"])
         p = node.params
         self.writer = BagWriter(
@@ -116,7 +116,7 @@ class Recorder:
             self.writer.write(connection, receive_ns, data)
 
         self.subscriptions[topic] = self.node.create_subscription(
-            type_name, topic, on_message, qos=reader_qos, raw=True
+            type_name, topic, on_message, qos_profile=reader_qos, raw=True
         )
         self.node.logger.info("recording %s [%s]", topic, type_name)
 
@@ -125,15 +125,11 @@ class Recorder:
         node writes /graph/ready and /experiment/anomaly, the recorder too)."""
         endpoints = self.node.readiness_report().endpoints
         writers = [e for e in endpoints if e.kind == "writer"]
-        own = {e.gid for e in writers}
         out = []
         for e in endpoints:
             if e.kind != "reader" or e.topic not in self.subscriptions:
                 continue
-            if e.matched is not None:
-                others = len(set(e.matched) - own)
-            else:  # rclpy: matched counts only
-                others = e.matched_count - sum(w.topic == e.topic for w in writers)
+            others = e.matched_count - sum(w.topic == e.topic for w in writers)
             if others > 0:
                 out.append(e.topic)
         return out

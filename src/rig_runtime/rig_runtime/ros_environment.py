@@ -1,25 +1,30 @@
-"""The ROS 2 environment a node runs in: backend, domain and discovery range (REP-less ROS 2
-conventions, as rmw implementations read them; docs/design.md §3.1).
+"""The ROS 2 environment a node runs in: rclpy, domain and discovery range (ROS 2's own
+variables, as rmw implementations read them; docs/design.md §3.1).
 
-- ``RIG_RUNTIME_BACKEND=rclpy|dds``: the runtime backend; unset, rclpy wherever it imports.
 - ``ROS_DOMAIN_ID``: 0..232 (the RTPS port formula's limit for participant index 0..120).
 - ``ROS_AUTOMATIC_DISCOVERY_RANGE``: ``SUBNET`` (ROS's default when unset), ``LOCALHOST``,
   ``OFF`` or ``SYSTEM_DEFAULT``; ``ROS_STATIC_PEERS``: ``;``-separated addresses that are
-  always contacted (unless the range is ``OFF``). rmw_fastrtps reads both itself; the Cyclone
-  DDS backend builds its configuration from them (dds_backend.cyclone_config).
+  always contacted (unless the range is ``OFF``). rmw_fastrtps reads both itself.
 - ``RIG_DDS_NETWORK=loopback|lan``: an older alias, read only when
   ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is unset (loopback = LOCALHOST, lan = SUBNET).
 
 Simulated campaigns (``aero-rig campaign``, ``aero-rig run sim``, ``sim.launch.py``) use
 LOCALHOST unless the range is set: they stay on this machine (:func:`localhost_by_default`).
+
+This module imports without rclpy: it is what says, in one line, that rclpy is missing.
 """
 
 import os
-from collections.abc import Iterable, Mapping, MutableMapping
+from collections.abc import Mapping, MutableMapping
 
-from .names import ArgumentError
 
-BACKEND_ENV = "RIG_RUNTIME_BACKEND"
+class ArgumentError(ValueError):
+    """A malformed ``--ros-args`` section or ROS environment."""
+
+
+# Set by the launcher for its nodes: a node whose parent process is no longer the launcher
+# (it was killed, even with SIGKILL) stops instead of running on unattended (node.py).
+LAUNCHER_PID_ENV = "RIG_LAUNCHER_PID"
 RANGE_ENV = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 PEERS_ENV = "ROS_STATIC_PEERS"
 DOMAIN_ENV = "ROS_DOMAIN_ID"
@@ -27,37 +32,34 @@ NETWORK_ALIAS_ENV = "RIG_DDS_NETWORK"
 RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
 MAX_DOMAIN_ID = 232
 # How long a participant that stopped announcing itself (a paused, hung or dead process) stays
-# matched, per backend: Cyclone DDS's default Discovery/LeaseDuration (10 s; cyclone_config
-# does not change it) and Fast DDS's default participant leaseDuration (20 s; rmw_fastrtps and
+# matched: Fast DDS's default participant leaseDuration (20 s; rmw_fastrtps and
 # fastdds_profiles.xml leave it). After that a reliable writer drops the reader and what it
 # did not deliver; the campaign's liveness bound is derived from it (aero_rig/cli/liveness.py).
-PARTICIPANT_LEASE_S = {"dds": 10.0, "rclpy": 20.0}
-
-
-def participant_lease_s(backend: str | None) -> float:
-    """The participant lease of a backend's DDS; the longest when it is not known."""
-    return PARTICIPANT_LEASE_S.get(backend or "", max(PARTICIPANT_LEASE_S.values()))
-
+PARTICIPANT_LEASE_S = 20.0
 
 INSTALL_RCLPY = 'pip install "ros-jazzy-rclpy[fastrtps]" ros-jazzy-common-interfaces'
+# What every graph command says, in one line, where rclpy does not import.
+NO_RCLPY = (
+    "rclpy does not import here: the node graph needs it. Install it with "
+    f"`{INSTALL_RCLPY}` (PyPI wheels: CPython 3.10-3.13, x86_64 Linux), source a ROS 2 Jazzy "
+    "install, or on macOS, aarch64 and Windows install RoboStack's conda packages "
+    "(`conda install -c conda-forge -c robostack-jazzy ros-jazzy-rclpy`). `aero-rig fit`, "
+    "`aero-rig view BAG` and `aero-rig bag` work without it."
+)
 
 # rmw_fastrtps's publication mode: SYNCHRONOUS (its default: the publishing call sends to every
 # reader) or ASYNCHRONOUS (Fast DDS's sending thread). Asynchronous streams the simulated
-# campaign a third faster, but loses samples at its start to Cyclone DDS readers (docs/design.md
-# §3.5), and adds about 3 ms of latency at real-time pace (README, "Measured figures").
+# campaign a third faster and adds about 3 ms of latency at real-time pace (docs/results.md).
 PUBLICATION_MODE_ENV = "RMW_FASTRTPS_PUBLICATION_MODE"
 
 
-def asynchronous_publication(
-    node_backends: Iterable[str], env: Mapping[str, str] | None = None
-) -> dict[str, str]:
-    """The environment that makes rmw_fastrtps publish asynchronously, for a graph whose every
-    node is on rclpy (no Cyclone DDS reader among them); nothing for a mixed or DDS graph, or
-    when the user chose a mode (``RMW_FASTRTPS_PUBLICATION_MODE`` set). The caller decides
-    whether the graph is paced as fast as it goes (the simulated campaign), where latency does
-    not matter."""
+def asynchronous_publication(env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment that makes rmw_fastrtps publish asynchronously; nothing when the user
+    chose a mode (``RMW_FASTRTPS_PUBLICATION_MODE`` set). The caller decides whether the
+    graph is paced as fast as it goes (the simulated campaign), where latency does not
+    matter."""
     env = os.environ if env is None else env
-    if PUBLICATION_MODE_ENV in env or set(node_backends) != {"rclpy"}:
+    if PUBLICATION_MODE_ENV in env:
         return {}
     return {PUBLICATION_MODE_ENV: "ASYNCHRONOUS"}
 
@@ -109,35 +111,21 @@ def rclpy_available() -> bool:
     return True
 
 
-def backend_name(env: MutableMapping[str, str] | None = None) -> str:
-    """``rclpy`` or ``dds``: the variable if set (rclpy must then import), else rclpy where it
-    imports, else dds."""
-    env = os.environ if env is None else env
-    choice = env.get(BACKEND_ENV, "").strip().lower()
-    if choice in ("dds", "cyclonedds"):
-        return "dds"
-    if choice == "rclpy":
-        if not rclpy_available():
-            raise RosEnvironmentError(
-                f"{BACKEND_ENV}=rclpy but rclpy does not import: install it with "
-                f"`{INSTALL_RCLPY}` (CPython 3.10-3.13, x86_64 Linux), source a ROS 2 Jazzy "
-                f"install, or set {BACKEND_ENV}=dds"
-            )
-        return "rclpy"
-    if choice:
-        raise RosEnvironmentError(f"{BACKEND_ENV}={choice!r}: expected 'rclpy' or 'dds'")
-    return "rclpy" if rclpy_available() else "dds"
+def require_rclpy() -> None:
+    """Raise RosEnvironmentError with :data:`NO_RCLPY` where rclpy does not import."""
+    if not rclpy_available():
+        raise RosEnvironmentError(NO_RCLPY)
 
 
-def check(env: MutableMapping[str, str] | None = None) -> str:
+def check(env: MutableMapping[str, str] | None = None) -> int:
     """Validate the ROS environment (raises RosEnvironmentError with one clear line) and make the
-    alias visible to rmw: returns the backend name."""
+    alias visible to rmw: returns the domain id."""
     env = os.environ if env is None else env
-    domain_id(env)
+    domain = domain_id(env)
     found = discovery_range(env)
     if not env.get(RANGE_ENV) and env.get(NETWORK_ALIAS_ENV):
         env[RANGE_ENV] = found  # rmw_fastrtps reads only the ROS variable
-    return backend_name(env)
+    return domain
 
 
 def localhost_by_default(env: MutableMapping[str, str]) -> None:

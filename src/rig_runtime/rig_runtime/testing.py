@@ -2,7 +2,7 @@
 
 Every process started through :class:`Processes` is stopped and reaped when the context
 exits, whatever happened in the test; every wait is bounded. Each test gets its own
-``ROS_DOMAIN_ID`` so graphs never see each other, and the loopback-only DDS configuration.
+``ROS_DOMAIN_ID`` so graphs never see each other, and loopback-only discovery.
 """
 
 import itertools
@@ -17,8 +17,6 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from .ros_environment import backend_name
-
 _counter = itertools.count()
 
 
@@ -28,12 +26,9 @@ def unique_domain_id() -> int:
 
 
 def graph_env(domain_id: int | None = None, **extra: str) -> dict[str, str]:
-    """The environment of a test graph: its own domain, loopback discovery, and the backend
-    of this run (``RIG_RUNTIME_BACKEND`` if set, else rclpy where it imports)."""
+    """The environment of a test graph: its own domain and loopback discovery."""
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(unique_domain_id() if domain_id is None else domain_id)
-    env["RIG_RUNTIME_BACKEND"] = backend_name()
-    env.pop("CYCLONEDDS_URI", None)
     env.pop("RIG_DDS_NETWORK", None)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.pop("ROS_STATIC_PEERS", None)
@@ -42,11 +37,11 @@ def graph_env(domain_id: int | None = None, **extra: str) -> dict[str, str]:
     return env
 
 
-DDS_KEYS = ("ROS_DOMAIN_ID", "RIG_RUNTIME_BACKEND", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+DDS_KEYS = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
 
 
 def join_graph(env: dict[str, str], setenv: Callable[[str, str], None] | None = None) -> None:
-    """Point this process's own nodes at the graph of ``env`` (same domain, backend, network).
+    """Point this process's own nodes at the graph of ``env`` (same domain and network).
 
     Tests pass ``monkeypatch.setenv`` so the change is undone after the test.
     """

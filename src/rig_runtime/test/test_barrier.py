@@ -6,14 +6,13 @@ from rig_runtime.barrier import Endpoint, ReadinessReport, StartBarrier, compati
 from rig_runtime.interface import GRAPH_READY
 
 
-def _w(topic: str, gid: str, matched: tuple[str, ...] | None = (), **kw: object) -> Endpoint:
-    count = len(matched) if matched is not None else int(kw.pop("count", 0))  # type: ignore[call-overload]
-    return Endpoint(topic, "writer", gid, matched=matched, matched_count=count, **kw)  # type: ignore[arg-type]
+def _w(topic: str, gid: str, matched: tuple[str, ...] = (), **kw: bool) -> Endpoint:
+    """A writer that has matched ``len(matched)`` readers (the names only document which)."""
+    return Endpoint(topic, "writer", gid, matched_count=len(matched), **kw)
 
 
-def _r(topic: str, gid: str, matched: tuple[str, ...] | None = (), **kw: object) -> Endpoint:
-    count = len(matched) if matched is not None else int(kw.pop("count", 0))  # type: ignore[call-overload]
-    return Endpoint(topic, "reader", gid, matched=matched, matched_count=count, **kw)  # type: ignore[arg-type]
+def _r(topic: str, gid: str, matched: tuple[str, ...] = (), **kw: bool) -> Endpoint:
+    return Endpoint(topic, "reader", gid, matched_count=len(matched), **kw)
 
 
 def _chain(matched: bool = True) -> tuple[ReadinessReport, list[ReadinessReport]]:
@@ -81,14 +80,14 @@ def test_one_sided_match_waits_for_the_other_side() -> None:
     for report in (act, lift, rec):
         barrier.update(report)
     problems = barrier.pending(own)
-    assert problems == ["/actuator: its writer of /state has not matched /lift's reader yet"]
+    assert problems == ["/actuator: its writer of /state has matched 1 of 2 member endpoints"]
     # ...and the other way round: the writer matched, the reader not yet.
     lift = ReadinessReport("/lift", True, endpoints=(_r("/state", "L1", ()),))
     act = members[0]
     barrier.update(act)
     barrier.update(lift)
     assert barrier.pending(own) == [
-        "/lift: its reader of /state has not matched /actuator's writer yet"
+        "/lift: its reader of /state has matched 0 of 1 member endpoints"
     ]
 
 
@@ -147,11 +146,11 @@ def test_incompatible_qos_pairs_are_not_required_to_match() -> None:
     assert barrier.pending() == []
 
 
-def test_counts_when_gids_are_unknown_rclpy() -> None:
+def test_each_endpoint_counts_every_compatible_member_endpoint() -> None:
     barrier = StartBarrier(["a", "b", "c"])
-    barrier.update(ReadinessReport("/a", True, endpoints=(_w("/x", "a#w0", None, count=1),)))
-    barrier.update(ReadinessReport("/b", True, endpoints=(_r("/x", "b#r0", None, count=1),)))
-    barrier.update(ReadinessReport("/c", True, endpoints=(_r("/x", "c#r0", None, count=0),)))
+    barrier.update(ReadinessReport("/a", True, endpoints=(_w("/x", "a#w0", ("b#r0",)),)))
+    barrier.update(ReadinessReport("/b", True, endpoints=(_r("/x", "b#r0", ("a#w0",)),)))
+    barrier.update(ReadinessReport("/c", True, endpoints=(_r("/x", "c#r0", ()),)))
     assert barrier.pending() == [
         "/a: its writer of /x has matched 1 of 2 member endpoints",
         "/c: its reader of /x has matched 0 of 1 member endpoints",
@@ -171,27 +170,3 @@ def test_report_json_round_trip() -> None:
         assert ReadinessReport.from_json(report.to_json()) == report
     with pytest.raises(ValueError):
         ReadinessReport.from_json('{"no": "node"}')
-
-
-def test_mixed_graph_counts_where_an_end_is_not_named() -> None:
-    """A DDS-backend generator (named GIDs) and an rclpy recorder (counts only): the generator's
-    writer is checked by GID against the DDS actuator and by count for the recorder."""
-    gen_matched = ReadinessReport("/generator", True, endpoints=(_w("/cmd", "G1", None, count=2),))
-    act = ReadinessReport("/actuator", True, endpoints=(_r("/cmd", "A1", ("G1",)),))
-    rec = ReadinessReport("/recorder", True, endpoints=(_r("/cmd", "rec#reader0", None, count=1),))
-    barrier = StartBarrier(["actuator", "recorder"])
-    barrier.update(act)
-    barrier.update(rec)
-    assert barrier.pending(gen_matched) == []
-    # Named: the writer has matched the actuator's reader but not yet the recorder's.
-    gen_named = ReadinessReport("/generator", True, endpoints=(_w("/cmd", "G1", ("A1",)),))
-    assert barrier.pending(gen_named) == [
-        "/generator: its writer of /cmd has matched 1 of 2 member endpoints"
-    ]
-    rec_waiting = ReadinessReport(
-        "/recorder", True, endpoints=(_r("/cmd", "rec#reader0", None, count=0),)
-    )
-    barrier.update(rec_waiting)
-    assert barrier.pending(gen_matched) == [
-        "/recorder: its reader of /cmd has matched 0 of 1 member endpoints"
-    ]

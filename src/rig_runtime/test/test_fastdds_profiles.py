@@ -1,4 +1,4 @@
-"""The rclpy backend's Fast DDS profile file (rig_runtime/fastdds_profiles.xml) is one that Fast
+"""The nodes' Fast DDS profile file (rig_runtime/fastdds_profiles.xml) is one that Fast
 DDS accepts. Fast DDS ignores a file it cannot parse, whole, with one error line on stdout (its
 default log consumer) and nothing else: the writers would then fall back to Fast DDS's 100 ms
 max_blocking_time and 3 s heartbeat period without any sign in the graph."""
@@ -7,12 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
-from rig_runtime.rclpy_backend import PROFILES_ENV, PROFILES_FILE
+from rig_runtime.node import PROFILES_ENV, PROFILES_FILE
 from rig_runtime.testing import graph_env
-
-pytest.importorskip("rclpy", reason="rclpy not installed (the DDS backend is used)")
 
 # A participant and a writer made with the file as Fast DDS's default profiles.
 MAKE_A_WRITER = """
@@ -28,7 +24,7 @@ print("writer made")
 
 
 def _output_of_a_writer(profiles: Path) -> str:
-    env = graph_env(RIG_RUNTIME_BACKEND="rclpy")
+    env = graph_env()
     env[PROFILES_ENV] = str(profiles)
     proc = subprocess.run(
         [sys.executable, "-c", MAKE_A_WRITER],

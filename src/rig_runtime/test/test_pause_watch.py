@@ -5,7 +5,7 @@ from collections.abc import Iterator
 import pytest
 
 from rig_runtime.node import PAUSE_WATCH_S, Node
-from rig_runtime.ros_environment import participant_lease_s
+from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 from rig_runtime.testing import graph_env
 
 
@@ -13,7 +13,7 @@ from rig_runtime.testing import graph_env
 def node(monkeypatch: pytest.MonkeyPatch) -> Iterator[Node]:
     for key, value in graph_env().items():
         monkeypatch.setenv(key, value)
-    made = Node("pause_watch_test", argv=[], backend="dds")
+    made = Node("pause_watch_test", argv=[])
     yield made
     made.close()
 
@@ -28,7 +28,7 @@ def test_a_pause_past_the_lease_is_logged_kept_and_passed_on_at_the_next_tick(
     seen: list[float] = []
     node.on_paused(seen.append)
     node.start_pause_watch()
-    lease = participant_lease_s("dds")
+    lease = PARTICIPANT_LEASE_S
     clock[0] += PAUSE_WATCH_S + lease  # late by exactly the lease: not past it
     node._watch_pause()
     assert node.paused_s == [] and seen == []

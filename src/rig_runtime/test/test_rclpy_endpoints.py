@@ -1,24 +1,22 @@
-"""The rclpy backend in one process, on real rclpy (the PyPI wheels): what it reports to the
-start barrier, its parameters (declared with descriptors, checked like the DDS backend's), its
-logs on /rosout, and the same message objects as the DDS backend."""
+"""The rig's rclpy Node in one process (the PyPI wheels): what it reports to the start barrier,
+its parameters (rclpy parameters with descriptors, checked by the runtime's rules), its logs on
+/rosout, and the runtime's message objects."""
 
 import dataclasses
 import logging
-import os
 from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 import pytest
+import rclpy.node
 
 from rig_runtime.barrier import StartBarrier
 from rig_runtime.interface import PITCH_COMMAND
-from rig_runtime.names import ArgumentError
 from rig_runtime.node import Node
 from rig_runtime.params import Parameter, ParameterError
+from rig_runtime.ros_environment import ArgumentError
 from rig_runtime.testing import graph_env, join_graph
-
-rclpy = pytest.importorskip("rclpy", reason="rclpy not installed (the DDS backend is used)")
 
 PARAMS = [
     Parameter("fs", 200.0, "sample rate [Hz]", min=1.0, max=10000.0),
@@ -31,7 +29,7 @@ PARAMS = [
 
 @pytest.fixture
 def rclpy_env(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    join_graph(graph_env(RIG_RUNTIME_BACKEND="rclpy"), monkeypatch.setenv)
+    join_graph(graph_env(), monkeypatch.setenv)
     yield
 
 
@@ -39,7 +37,7 @@ def test_counts_not_gids_and_the_barrier_decides_on_them(rclpy_env: None) -> Non
     gen = Node("generator", argv=[])
     act = Node("sim_actuator", argv=[])
     try:
-        assert gen.backend_name == act.backend_name == "rclpy"
+        assert isinstance(gen, rclpy.node.Node)  # the rig's Node is an rclpy node
         pub = gen.create_publisher(PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos)
         act.create_subscription(
             PITCH_COMMAND.type, PITCH_COMMAND.name, lambda m: None, PITCH_COMMAND.qos
@@ -48,7 +46,7 @@ def test_counts_not_gids_and_the_barrier_decides_on_them(rclpy_env: None) -> Non
         assert act.spin_until(lambda: act.readiness_report().endpoints[-1].matched_count == 1, 10.0)
         report = gen.readiness_report()
         (writer,) = [e for e in report.endpoints if e.topic == PITCH_COMMAND.name]
-        assert writer.matched is None and writer.matched_count == 1 and writer.kind == "writer"
+        assert writer.matched_count == 1 and writer.kind == "writer"
         (reader,) = act.readiness_report().endpoints[-1:]
         assert reader.topic == PITCH_COMMAND.name and reader.reliable
         assert not reader.transient_local
@@ -75,9 +73,11 @@ def test_messages_are_the_runtime_s_own_on_both_ends(rclpy_env: None) -> None:
     got: list[Any] = []
     try:
         listener.create_subscription(
-            "sensor_msgs/msg/JointState", "/chatter", got.append, qos="stream"
+            "sensor_msgs/msg/JointState", "/chatter", got.append, qos_profile="stream"
         )
-        pub = talker.create_publisher("sensor_msgs/msg/JointState", "/chatter", qos="stream")
+        pub = talker.create_publisher(
+            "sensor_msgs/msg/JointState", "/chatter", qos_profile="stream"
+        )
         assert talker.spin_until(lambda: pub.subscription_count() == 1, 10.0)
         msg = talker.new_message("sensor_msgs/msg/JointState", name=["pitch"])
         msg.position = np.array([0.25])
@@ -103,7 +103,7 @@ def test_parameters_come_from_rcl_and_keep_the_runtime_s_checks(rclpy_env: None)
         assert node.params["fs"] == 100.0 and isinstance(node.params["fs"], float)
         assert node.params["names"] == ["ab", "cd"]
         assert node.params.sources["fs"] == "--ros-args"
-        rnode = node._backend.node  # type: ignore[attr-defined]
+        rnode = node  # an rclpy node: rclpy's own parameter API
         descriptor = rnode.describe_parameter("fs")
         assert descriptor.read_only and descriptor.description == "sample rate [Hz]"
         assert descriptor.floating_point_range[0].from_value == 1.0
@@ -146,10 +146,14 @@ def test_bad_arguments_give_one_clear_error(
 def test_bad_environment_is_refused_before_anything_starts(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setenv("RIG_RUNTIME_BACKEND", "zenoh")
-    with pytest.raises(ArgumentError, match="expected 'rclpy' or 'dds'"):
+    monkeypatch.setenv("RIG_RCLPY_EXECUTOR", "multi")
+    with pytest.raises(ArgumentError, match="expected 'events' or 'single'"):
         Node("gen", PARAMS, [])
-    monkeypatch.setenv("RIG_RUNTIME_BACKEND", "rclpy")
+    monkeypatch.delenv("RIG_RCLPY_EXECUTOR")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LAN")
+    with pytest.raises(ArgumentError, match="ROS_AUTOMATIC_DISCOVERY_RANGE='LAN'"):
+        Node("gen", PARAMS, [])
+    monkeypatch.delenv("ROS_AUTOMATIC_DISCOVERY_RANGE")
     monkeypatch.setenv("ROS_DOMAIN_ID", "300")
     with pytest.raises(ArgumentError, match=r"ROS_DOMAIN_ID=300 is outside 0\.\.232"):
         Node("gen", PARAMS, [])
@@ -165,7 +169,7 @@ def test_logs_reach_rosout(rclpy_env: None) -> None:
         # a record written in between (it failed that way once under load); a transient-local
         # one gets it from the writer's history when the writer side matches.
         watcher.create_subscription(
-            "rcl_interfaces/msg/Log", "/rosout", got.append, qos="latched", depth=100
+            "rcl_interfaces/msg/Log", "/rosout", got.append, qos_profile="latched", depth=100
         )
         # Matched with both nodes' /rosout writers (its own and the speaker's).
         assert watcher.spin_until(
@@ -185,17 +189,20 @@ def test_logs_reach_rosout(rclpy_env: None) -> None:
         watcher.close()
 
 
-def test_rclpy_requested_but_missing_names_the_install_command(
-    monkeypatch: pytest.MonkeyPatch,
+def test_without_rclpy_a_graph_command_says_how_to_get_it(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from rig_runtime import ros_environment
+    """One line naming the PyPI wheels, a ROS 2 Jazzy install and RoboStack's conda packages,
+    and exit code 2, before anything starts (rig-launch; the aero-rig verbs use the same
+    check, aero_rig/test/test_without_rclpy.py runs them in a venv without rclpy)."""
+    from rig_runtime import launcher, ros_environment
 
     monkeypatch.setattr(ros_environment, "rclpy_available", lambda: False)
-    monkeypatch.setenv("RIG_RUNTIME_BACKEND", "rclpy")
     with pytest.raises(ArgumentError, match=r"pip install \"ros-jazzy-rclpy\[fastrtps\]\""):
-        ros_environment.check(dict(os.environ))
-    monkeypatch.delenv("RIG_RUNTIME_BACKEND")
-    assert ros_environment.backend_name(dict(os.environ)) == "dds"
+        ros_environment.require_rclpy()
+    assert launcher.main(["graph.yaml"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "ROS 2 Jazzy" in line and "robostack" in line and "aero-rig fit" in line
 
 
 def test_a_topic_known_only_from_its_readers_has_no_type_for_the_recorder_yet(
@@ -214,7 +221,7 @@ def test_a_topic_known_only_from_its_readers_has_no_type_for_the_recorder_yet(
             "std_msgs/msg/Float64", "/wing/lift_probe", lambda m: None, "default"
         )
         assert recorder.spin_until(
-            lambda: "/wing/lift_probe" in dict(recorder._backend.node.get_topic_names_and_types()),  # type: ignore[attr-defined]
+            lambda: "/wing/lift_probe" in dict(recorder.get_topic_names_and_types()),
             10.0,
         )
         assert "/wing/lift_probe" not in recorder.topic_types()

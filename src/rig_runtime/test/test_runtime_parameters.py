@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from rig_runtime.names import parse_ros_args
 from rig_runtime.params import Parameter, ParameterError, resolve_parameters
 from rig_runtime.testing import graph_env
 
@@ -51,30 +50,6 @@ def test_unknown_name_in_yaml(tmp_path: Path) -> None:
     f.write_text("node:\n  ros__parameters:\n    rate_hz: 10.0\n    typo_name: 3\n")
     with pytest.raises(ParameterError, match="unknown parameter 'typo_name'"):
         resolve_parameters(PARAMS, "/node", [f])
-
-
-def test_ros_args_parsing() -> None:
-    args = parse_ros_args(
-        [
-            "x",
-            "--ros-args",
-            "-r",
-            "__node:=gen",
-            "-r",
-            "__ns:=/rig",
-            "-r",
-            "/a:=/b",
-            "-p",
-            "k:=1",
-            "--params-file",
-            "f.yaml",
-            "--",
-            "y",
-        ]
-    )
-    assert (args.node_name, args.namespace) == ("gen", "/rig")
-    assert args.remaps == {"/a": "/b"} and args.overrides == [("k", "1")]
-    assert args.param_files == ["f.yaml"] and args.user_args == ["x", "y"]
 
 
 @pytest.mark.parametrize(

@@ -11,10 +11,9 @@
     aero-rig bag recover BAG
 
 ``campaign`` launches the simulated graph (generator, simulated actuator, simulated wing, lift,
-identifier, recorder, optionally the Rerun view) as processes on one backend (rclpy where it
-imports, else Cyclone DDS; RIG_RUNTIME_BACKEND chooses), runs
-the plan to its end, waits for the final identification, stops everything and prints Table 1
-and the run directory (bag, models, report, .rrd). A run that lost or excluded data (missing or
+identifier, recorder, optionally the Rerun view) as rclpy node processes, runs the plan to its
+end, waits for the final identification, stops everything and prints Table 1 and the run
+directory (bag, models, report, .rrd). A run that lost or excluded data (missing or
 duplicated samples, anomalies such as a free-running actuator, excluded periods or sine records,
 a bag short of samples) lists what on its last lines and exits with code 3, unless
 ``--allow-excluded`` is given.
@@ -34,10 +33,8 @@ from .common import (
     EXIT_NOT_CLEAN,
     EXIT_USAGE,
     VIEW_MODES,
-    backend_label,
-    checked_backend,
+    checked_ros_environment,
     config_path,
-    parse_node_backends,
 )
 from .monitor import CampaignMonitor
 
@@ -45,12 +42,10 @@ __all__ = [
     "EXIT_NOT_CLEAN",
     "VIEW_MODES",
     "CampaignMonitor",
-    "backend_label",
     "build_parser",
-    "checked_backend",
+    "checked_ros_environment",
     "config_path",
     "main",
-    "parse_node_backends",
 ]
 
 VERBS = (campaign, run, fit, view, bag)  # in the order of ``aero-rig --help``

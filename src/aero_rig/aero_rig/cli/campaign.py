@@ -28,14 +28,11 @@ from .common import (
     EXIT_OK,
     EXIT_USAGE,
     VIEW_MODES,
-    add_backend_option,
     add_override_option,
-    backend_label,
-    checked_backend,
+    checked_ros_environment,
     config_path,
     merge_overrides,
     new_run_dir,
-    parse_node_backends,
     with_view,
 )
 from .monitor import CampaignMonitor
@@ -87,47 +84,37 @@ def add_parser(subparsers: Any) -> None:
         action="store_true",
         help="exit 0 even if data were lost or excluded (they are still listed)",
     )
-    add_backend_option(p)
     add_override_option(p)
     p.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
-    backend = checked_backend()
+    checked_ros_environment()
     user_overrides = parse_overrides(args.overrides)
     graph = load_graph(Path(args.graph) if args.graph else config_path("sim.yaml"))
     run_dir = new_run_dir(args.out)
     rrd = run_dir / "campaign.rrd" if args.rerun == "save" else None
     graph = with_view(graph, args.rerun, rrd)
     overrides = merge_overrides(campaign_overrides(args, run_dir), user_overrides)
-    env = use_backend(backend)
-    print(
-        f"aero-rig: campaign '{args.plan}' on {backend_label(backend)} -> {run_dir}",
-        file=sys.stderr,
-    )
+    # A simulated campaign stays on this machine unless a discovery range was chosen.
+    ros_environment.localhost_by_default(os.environ)
+    print(f"aero-rig: campaign '{args.plan}' -> {run_dir}", file=sys.stderr)
     try:
-        launcher = Launcher(
-            graph,
-            env=env,
-            overrides=overrides,
-            log_dir=run_dir / "logs",
-            backends=parse_node_backends(args.node_backend),
-        )
+        launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs")
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    node_backends = launcher.node_backends().values()
     if args.real_time_factor == 0:  # as fast as the graph takes: throughput, not latency
-        fast = ros_environment.asynchronous_publication(node_backends)
+        fast = ros_environment.asynchronous_publication()
         if fast:
             launcher.env.update(fast)
             print(
-                "aero-rig: every node on rclpy: Fast DDS publishes asynchronously "
+                "aero-rig: Fast DDS publishes asynchronously "
                 f"({ros_environment.PUBLICATION_MODE_ENV}; set it to SYNCHRONOUS to keep "
                 "rmw_fastrtps's default)",
                 file=sys.stderr,
             )
-    outcome = launch_and_monitor(launcher, backend, timeout=args.timeout, quiet=args.quiet)
+    outcome = launch_and_monitor(launcher, timeout=args.timeout, quiet=args.quiet)
     recovered = None
     if outcome.stalled and not launcher.failure:
         recovered = recover_from_bag(run_dir, launcher, outcome.stalled)
@@ -152,10 +139,12 @@ def main(args: argparse.Namespace) -> int:
         )
         return EXIT_FAILED
     return summarise(
-        run_dir, backend, outcome, allow_excluded=args.allow_excluded, recovered=recovered,
-        publication=(launcher.env.get(ros_environment.PUBLICATION_MODE_ENV, "SYNCHRONOUS")
-                     if "rclpy" in node_backends else None),
-    )  # fmt: skip
+        run_dir,
+        outcome,
+        allow_excluded=args.allow_excluded,
+        recovered=recovered,
+        publication=launcher.env.get(ros_environment.PUBLICATION_MODE_ENV, "SYNCHRONOUS"),
+    )
 
 
 def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dict[str, Any]]:
@@ -178,19 +167,7 @@ def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dic
     }
 
 
-def use_backend(backend: str) -> dict[str, str]:
-    """Every node, and the monitor in this process, on one backend: the nodes' environment.
-
-    A simulated campaign stays on this machine unless a discovery range was chosen
-    (ros_environment.py).
-    """
-    env = {"RIG_RUNTIME_BACKEND": backend}
-    os.environ.update(env)
-    ros_environment.localhost_by_default(os.environ)
-    return env
-
-
-def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quiet: bool) -> Outcome:
+def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Outcome:
     """Start the graph, follow it until it ends, fails, stalls, times out or is stopped; stop
     it.
 
@@ -198,7 +175,7 @@ def launch_and_monitor(launcher: Launcher, backend: str, *, timeout: float, quie
     not end by itself (a node's exit, the timeout, the signal); ``Outcome.stalled`` that the
     identifier made no progress within the liveness bound after the plan's end (liveness.py).
     """
-    monitor = CampaignMonitor(backend)
+    monitor = CampaignMonitor()
     stalled: str | None = None
     started = time.monotonic()
     stopped_by: list[str] = []
@@ -332,15 +309,14 @@ def identifier_config(launcher: Launcher) -> Any:
 
 def summarise(
     run_dir: Path,
-    backend: str,
     outcome: Outcome,
     *,
     allow_excluded: bool,
     recovered: dict[str, Any] | None = None,
-    publication: str | None = None,
+    publication: str = "SYNCHRONOUS",
 ) -> int:
     """Judge a finished run, write campaign.json, print the results; the exit code.
-    ``publication``: rmw_fastrtps's publication mode of the rclpy nodes (None: none on rclpy)."""
+    ``publication``: rmw_fastrtps's publication mode of the nodes."""
     bad = {n: c for n, c in outcome.codes.items() if c not in (0, -2, 130)}
     if not (run_dir / "table1_all_levels.md").exists():
         print(
@@ -356,7 +332,7 @@ def summarise(
         experiment_s = outcome.total / outcome.fs
     summary = {
         "wall_s": round(outcome.wall, 1),
-        "backend": backend,
+        "middleware": "rclpy",
         "fastdds_publication": publication,
         "experiment_s": round(experiment_s, 1) if experiment_s else None,
         "real_time_factor": round(experiment_s / outcome.wall, 1) if experiment_s else None,

@@ -1,8 +1,7 @@
-"""What several ``aero-rig`` verbs share: exit codes, the backend check, config paths, the live
-view node, run directories, parameter overrides and the ``-p`` / ``--node-backend`` options."""
+"""What several ``aero-rig`` verbs share: exit codes, the ROS environment check, config paths,
+the live view node, run directories, parameter overrides and the ``-p`` option."""
 
 import argparse
-import os
 import sys
 from dataclasses import replace
 from datetime import datetime
@@ -60,24 +59,14 @@ def merge_overrides(
     return out
 
 
-def backend_label(backend: str) -> str:
-    return "rclpy (Fast DDS)" if backend == "rclpy" else "the Cyclone DDS backend"
-
-
-def checked_backend() -> str:
-    """The runtime backend of the graph to start, or SystemExit(2) with one clear line."""
+def checked_ros_environment() -> None:
+    """rclpy imports and the ROS environment is valid, or SystemExit(2) with one clear line."""
     try:
-        backend = ros_environment.check()
+        ros_environment.require_rclpy()
+        ros_environment.check()
     except ros_environment.RosEnvironmentError as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
-    if backend == "dds" and not os.environ.get(ros_environment.BACKEND_ENV):
-        print(
-            "aero-rig: rclpy does not import here; the graph runs on the Cyclone DDS backend "
-            f"(for rclpy: {ros_environment.INSTALL_RCLPY})",
-            file=sys.stderr,
-        )
-    return backend
 
 
 def add_override_option(p: argparse.ArgumentParser) -> None:
@@ -89,33 +78,3 @@ def add_override_option(p: argparse.ArgumentParser) -> None:
         metavar="NODE.PARAM:=VALUE",
         help="set a node parameter, as rig-launch -p (e.g. -p sim_wing.seed:=3); repeatable",
     )
-
-
-def add_backend_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--node-backend",
-        action="append",
-        default=[],
-        metavar="NODE=BACKEND",
-        help="run NODE on rclpy or dds, the others on RIG_RUNTIME_BACKEND's (default: rclpy "
-        "where it imports): a mixed graph, as a lab with ROS PCs and a venv laptop; repeatable",
-    )
-
-
-def parse_node_backends(items: list[str]) -> dict[str, str]:
-    """``["lift=dds", ...]`` -> ``{"lift": "dds"}``; SystemExit(2) on a malformed item."""
-    out = {}
-    for item in items:
-        name, sep, backend = item.partition("=")
-        if not sep or backend not in ("rclpy", "dds") or not name:
-            print(f"aero-rig: --node-backend {item!r}: expected NODE=rclpy|dds", file=sys.stderr)
-            raise SystemExit(EXIT_USAGE)
-        if backend == "rclpy" and not ros_environment.rclpy_available():
-            print(
-                f"aero-rig: --node-backend {item}: rclpy does not import here; install it with "
-                f"`{ros_environment.INSTALL_RCLPY}`",
-                file=sys.stderr,
-            )
-            raise SystemExit(EXIT_USAGE)
-        out[name] = backend
-    return out

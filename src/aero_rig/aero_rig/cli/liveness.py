@@ -26,14 +26,14 @@ longest legitimate stand-still, the adaptive hold at a period's end, which the l
 
 from dataclasses import dataclass, field
 
-from rig_runtime.ros_environment import participant_lease_s
+from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
 STATUS_PERIOD_S = 1.0  # the identifier's status timer (identifier_node.py)
 
 
-def stall_bound_s(backend: str) -> float:
+def stall_bound_s() -> float:
     """Seconds without progress that count as a stall."""
-    return participant_lease_s(backend) + 2 * STATUS_PERIOD_S
+    return PARTICIPANT_LEASE_S + 2 * STATUS_PERIOD_S
 
 
 def stopped_note(stopped: dict[str, float]) -> str:

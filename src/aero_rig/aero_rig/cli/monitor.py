@@ -19,11 +19,11 @@ from .liveness import Liveness, stall_bound_s
 class CampaignMonitor:
     """In-process observer: progress from segment events, end from the identifier's status."""
 
-    def __init__(self, backend: str) -> None:
+    def __init__(self) -> None:
         from rig_runtime.node import Node
 
-        self.liveness = Liveness(stall_bound_s(backend))
-        self.node = Node("aero_rig_campaign", argv=[])  # the graph's backend (the env's)
+        self.liveness = Liveness(stall_bound_s())
+        self.node = Node("aero_rig_campaign", argv=[])
         self.total = 0
         self.revision = -1  # of the plan held (an adaptive run revises it)
         self.fs = 0.0  # the plan's sample rate [Hz]

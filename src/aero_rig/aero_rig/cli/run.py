@@ -14,14 +14,11 @@ from rig_runtime.launcher import Launcher, parse_overrides
 from .common import (
     EXIT_USAGE,
     VIEW_MODES,
-    add_backend_option,
     add_override_option,
-    backend_label,
-    checked_backend,
+    checked_ros_environment,
     config_path,
     merge_overrides,
     new_run_dir,
-    parse_node_backends,
     with_view,
 )
 
@@ -33,16 +30,15 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     p.add_argument("--out", default=None, help="run directory for the bag and the report")
     p.add_argument("--rerun", choices=VIEW_MODES, default="off", help="live Rerun view")
-    add_backend_option(p)
     add_override_option(p)
     p.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
-    backend = checked_backend()
+    checked_ros_environment()
     if args.which == "sim":
         ros_environment.localhost_by_default(os.environ)
-    print(f"aero-rig: {args.which} graph on {backend_label(backend)}", file=sys.stderr)
+    print(f"aero-rig: {args.which} graph", file=sys.stderr)
     graph = load_graph(Path(args.graph) if args.graph else config_path(f"{args.which}.yaml"))
     graph = with_view(graph, args.rerun, None)
     overrides: dict[str, dict[str, Any]] = {}
@@ -53,9 +49,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"aero-rig: recording to {out / 'bag'}", file=sys.stderr)
     overrides = merge_overrides(overrides, parse_overrides(args.overrides))
     try:
-        launcher = Launcher(
-            graph, overrides=overrides, backends=parse_node_backends(args.node_backend)
-        )
+        launcher = Launcher(graph, overrides=overrides)
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -7,18 +7,21 @@ from typing import Any
 from rig_runtime.graph import GraphSpec, load_graph
 from rig_runtime.launcher import Launcher
 
-from .common import EXIT_OK, config_path, with_view
+from .common import EXIT_OK, checked_ros_environment, config_path, with_view
 
 
 def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser("view", help="Rerun view of a bag or of the live graph")
-    p.add_argument("source", help="BAG directory or 'live'")
+    p.add_argument(
+        "source", help="BAG directory (no rclpy needed) or 'live' (the graph's view node)"
+    )
     p.add_argument("--save", default=None, help="write an .rrd instead of spawning a viewer")
     p.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
     if args.source == "live":
+        checked_ros_environment()
         graph = with_view(
             load_graph(config_path("live_view.yaml")),
             "save" if args.save else "spawn",

@@ -1,4 +1,4 @@
-"""Rerun view of a pitching-wing experiment, live (DDS) or from a rosbag.
+"""Rerun view of a pitching-wing experiment, live (an rclpy node) or from a rosbag.
 
 Shows, on the ``experiment_time`` timeline (the message stamps): commanded and measured pitch
 [deg] and C_l over time; the Cp distribution over the chord (−Cp up, upper and lower surface,
@@ -12,9 +12,10 @@ server a viewer connects to; ``connect`` streams to a running viewer at ``url``;
 counts messages (not ``off``: YAML reads that as false). With ``rrd_path`` set, every mode
 also saves to that file.
 
-This module imports rerun (numpy >= 2): run it from the project's virtual environment on the
-Cyclone DDS backend, never in an rclpy process (docs/design.md §3). ``RigViewLogger`` has no
-middleware and takes plain messages; ``view_bag`` replays a recorded bag through it.
+This module imports rerun (numpy >= 2): run it from the project's virtual environment, where
+the PyPI rclpy wheels work with numpy 2 (docs/design.md §3.9). ``RigViewLogger`` has no
+middleware and takes plain messages; ``view_bag`` replays a recorded bag through it, without
+rclpy.
 
 The ``view`` node subscribes the rig topics and logs them through ``RigViewLogger``.
 """
@@ -98,7 +99,9 @@ class View:
             raw = takes_cdr(handler)  # a raw subscription: (CDR bytes, receive time)
             if raw:
                 call = self._serialized(call)
-            node.create_subscription(type_name, topic, self._guard(topic, call), qos, depth, raw)
+            node.create_subscription(
+                type_name, topic, self._guard(topic, call), qos, depth=depth, raw=raw
+            )
         # The series go to Rerun in batches (RigViewLogger): this bounds how long a sample waits.
         node.create_timer(p["series_flush_s"], self.logger.send_series)
         if p["stats_period_s"] > 0:
