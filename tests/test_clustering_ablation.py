@@ -108,3 +108,24 @@ def test_every_final_report_carries_the_ablation(tmp_path: Path) -> None:
     # 3 + 4 kept periods, all used (the light one dropped)
     assert "| high | 2 | [7, 1] | 7 / 8 |" in (tmp_path / "clustering.md").read_text()
     assert written["clusters_high"].stat().st_size > 0
+
+
+def test_the_ablation_runs_beside_and_gives_what_it_gives_alone() -> None:
+    """The final identification runs its ablation in a thread beside its own fits
+    (pipeline._start_ablation): the ablation's messages come from that thread, and its tables
+    are byte for byte those of the same configuration without clustering run on its own."""
+    import dataclasses
+    import threading
+
+    _, asm, result = _scenario(2)
+    threads: set[str] = set()
+    config = IdentificationConfig(scan=False, max_iter=40)
+    beside = identify(asm, config, final=True, log=lambda _m: threads.add(
+        threading.current_thread().name))  # fmt: skip
+    assert any(name.startswith("clustering_ablation") for name in threads), threads
+    assert threading.main_thread().name in threads
+    plain = dataclasses.replace(config, clustering=False, clustering_ablation=False, bootstrap=0)
+    alone = identify(asm, plain, final=True)
+    assert beside.no_clustering is not None
+    assert beside.no_clustering.tables() == alone.tables()
+    assert beside.tables() == result.tables()  # and the clustered one is unchanged

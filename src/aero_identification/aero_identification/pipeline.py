@@ -33,6 +33,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from typing import Any
 
@@ -165,63 +166,101 @@ def _identify(
             result.warnings.append(f"level {lv.name}: {exc}")
     result.timings_s["bla"] = time.perf_counter() - t_start
 
-    estimation = [r for r in result.levels.values() if r.role == "estimation"]
-    low = estimation[0] if estimation else None
-    result.linear_level1 = low.linear if low else None
+    # 5 (started here). The clustering ablation, the same pipeline on every valid period, runs
+    # in a thread beside steps 3-4: its fits and this one's are independent, and the PNLSS
+    # kernels release the GIL, so the final identification uses both cores.
+    ablation = _start_ablation(dataset, result, config, final, client, held_out, say)
 
-    # 3. PNLSS on every estimation level, its iterate chosen on their held-out periods.
-    t0 = time.perf_counter()
-    ready = [
-        r
-        for r in estimation
-        if r.record.data is not None and r.bla is not None and r.linear is not None
-    ]
-    if config.pnlss and low is not None and result.linear_level1 is not None and ready:
-        result.pnlss_start_level = low.name
-        if final and config.scan:
-            result.scan = _scan(ready, result, config, client, say)
-            result.pnlss_all = result.scan.best if result.scan is not None else None
-        else:
-            result.pnlss_all = _fit(ready, result, config, "all levels", say)
-        if dataset.sines_planned and ready[0] is low:
-            # Level 1 is complete long before the campaign ends: refit its PNLSS only when its
-            # kept periods changed.
-            signature = _signature(low, config)
-            if (
-                previous is not None
-                and previous.pnlss_level1 is not None
-                and previous.level1_signature == signature
-            ):
-                result.pnlss_level1 = previous.pnlss_level1
-            elif len(ready) == 1:
-                result.pnlss_level1 = result.pnlss_all  # the same data: the same fit
-            else:
-                result.pnlss_level1 = _fit([low], result, config, "level 1", say)
-            result.level1_signature = signature
-    result.timings_s["pnlss"] = time.perf_counter() - t0
+    try:
+        estimation = [r for r in result.levels.values() if r.role == "estimation"]
+        low = estimation[0] if estimation else None
+        result.linear_level1 = low.linear if low else None
 
-    # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
-    _validate(dataset, result)
-    if final and config.bootstrap > 0:
-        _estimation_bootstrap(dataset, result, config, client, say)
-
-    # 5. The ablation: the same pipeline on every valid period (final identification only).
-    if final and config.clustering and config.clustering_ablation:
+        # 3. PNLSS on every estimation level, its iterate chosen on their held-out periods.
         t0 = time.perf_counter()
+        ready = [
+            r
+            for r in estimation
+            if r.record.data is not None and r.bla is not None and r.linear is not None
+        ]
+        if config.pnlss and low is not None and result.linear_level1 is not None and ready:
+            result.pnlss_start_level = low.name
+            if final and config.scan:
+                result.scan = _scan(ready, result, config, client, say)
+                result.pnlss_all = result.scan.best if result.scan is not None else None
+            else:
+                result.pnlss_all = _fit(ready, result, config, "all levels", say)
+            if dataset.sines_planned and ready[0] is low:
+                # Level 1 is complete long before the campaign ends: refit its PNLSS only when its
+                # kept periods changed.
+                signature = _signature(low, config)
+                if (
+                    previous is not None
+                    and previous.pnlss_level1 is not None
+                    and previous.level1_signature == signature
+                ):
+                    result.pnlss_level1 = previous.pnlss_level1
+                elif len(ready) == 1:
+                    result.pnlss_level1 = result.pnlss_all  # the same data: the same fit
+                else:
+                    result.pnlss_level1 = _fit([low], result, config, "level 1", say)
+                result.level1_signature = signature
+        result.timings_s["pnlss"] = time.perf_counter() - t0
+
+        # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
+        _validate(dataset, result)
+        if final and config.bootstrap > 0:
+            _estimation_bootstrap(dataset, result, config, client, say)
+    except BaseException:
+        if ablation is not None:  # not left running past this call (and its BLAS limit)
+            wait([ablation])
+        raise
+
+    # 5. The ablation's result (final identification only).
+    if final and config.clustering and config.clustering_ablation:
         plain = dataclasses.replace(
             config, clustering=False, clustering_ablation=False, bootstrap=0
         )
-        if any(lv.clusters is not None and lv.clusters.k > 1 for lv in result.levels.values()):
-            result.no_clustering = identify(
-                dataset, plain, final=True, client=client, held_out=held_out, log=say
-            )
+        if ablation is not None:
+            result.no_clustering, result.timings_s["no_clustering"] = ablation.result()
         else:  # one cluster everywhere: every valid period was used, the same identification
             # (its config has no bootstrap, so neither has it)
             result.no_clustering = dataclasses.replace(result, config=plain, bootstrap=None)
+            result.timings_s["no_clustering"] = 0.0
         result.clustering_effect = clustering_effect(result, result.no_clustering)
-        result.timings_s["no_clustering"] = time.perf_counter() - t0
     _finish(dataset, result, t_start)
     return result
+
+
+def _start_ablation(
+    dataset: Dataset,
+    result: IdentificationResult,
+    config: IdentificationConfig,
+    final: bool,
+    client: Any,
+    held_out: tuple[str, ...],
+    say: Log,
+) -> Future[tuple[IdentificationResult, float]] | None:
+    """The identification without clustering, started in its own thread once the level models
+    say whether clustering dropped any period (None: not asked for, or nothing to ablate).
+    Its future gives (result, seconds). The caller holds one BLAS thread (`identify`) until
+    it has the result, so both threads' fits run with the same BLAS as one after the other
+    would, and give the same numbers."""
+    if not (final and config.clustering and config.clustering_ablation):
+        return None
+    if not any(lv.clusters is not None and lv.clusters.k > 1 for lv in result.levels.values()):
+        return None
+    plain = dataclasses.replace(config, clustering=False, clustering_ablation=False, bootstrap=0)
+
+    def run() -> tuple[IdentificationResult, float]:
+        t0 = time.perf_counter()
+        done = identify(dataset, plain, final=True, client=client, held_out=held_out, log=say)
+        return done, time.perf_counter() - t0
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clustering_ablation")
+    future = pool.submit(run)
+    pool.shutdown(wait=False)  # the thread ends with its job; the caller waits on the future
+    return future
 
 
 def _finish(dataset: Dataset, result: IdentificationResult, t_start: float) -> None:

@@ -140,7 +140,7 @@ def _simulate_one(A, B, C, D, E, F, exp_state, exp_output, u, x0, bound, y) -> i
     return T
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def simulate_records(A, B, C, D, E, F, exp_state, exp_output, u, x0, bound):
     """Simulate R records in parallel.
 
@@ -259,7 +259,7 @@ def _jacobian_one(A, B, C, D, E, F, exp_state, exp_output, u, y_meas, n_skip, of
     return True
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def jacobian_records(A, B, C, D, E, F, exp_state, exp_output, u, y_meas, n_skip, offset,
                      fit_offset, bound, J):  # fmt: skip
     """Analytic Jacobian of the simulated output and the residual, for R parallel records.
