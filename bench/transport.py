@@ -53,6 +53,12 @@ def _stream() -> Any:
     return to_rclpy_qos(PROFILES["stream"]) if _native() else "stream"
 
 
+def _matched(publisher: Any) -> int:
+    """Matched readers of a CdrPublisher or of an rclpy publisher."""
+    count = getattr(publisher, "subscription_count", None) or publisher.get_subscription_count
+    return int(count())
+
+
 def _cloud(node: Node, seq: int) -> Any:
     """A tap cloud; in native mode as rclpy's message (converted before any timing)."""
     msg = make_message(node, "taps", seq)
@@ -146,9 +152,7 @@ def measure(args: argparse.Namespace, config: dict[str, str]) -> dict[str, Any]:
 
         node.create_subscription(_cloud_type(), "/bench/pong", on_pong, _stream())
         node.create_subscription(RESULT, "/bench/result", on_result, qos_profile="latched")
-        if not node.spin_until(
-            lambda: bool(ping.subscription_count() and flood.subscription_count() and latest), 30
-        ):
+        if not node.spin_until(lambda: bool(_matched(ping) and _matched(flood) and latest), 30):
             raise RuntimeError("echo process did not appear on the DDS domain within 30 s")
 
         # Phase 1: round trip at 200 Hz.
