@@ -1,6 +1,6 @@
 """The whole campaign graph as rclpy node processes, the offline fit, and faults: the short plan's
 identification; the small plan (conftest.small_plan) where a run must lose nothing and give
-the idle run's tables under load, on a mixed graph or after the identifier's kill."""
+the idle run's tables under load or after the identifier's kill."""
 
 import json
 import os
@@ -98,7 +98,7 @@ def small_campaign(
 ) -> tuple[Path, subprocess.CompletedProcess[str]]:
     """The small plan (conftest.small_plan: one level, 69 s of experiment) on the same wing,
     idle: the reference of the runs below that must lose nothing and give the same tables
-    under load, on a mixed graph or after a fault (a third of the short campaign's time)."""
+    under load or after a fault (a third of the short campaign's time)."""
     run = tmp_path_factory.mktemp("small") / "run"
     proc = _aero_rig(
         *("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet"),

@@ -2,7 +2,7 @@
 
 Each case runs the real process graph on rclpy with a small plan (one level, two
 realizations of 2 periods, one sine: 69 s of experiment; conftest.small_plan) and checks the
-outcome a user must see. The starved, mixed and paused runs, which must give the idle run's
+outcome a user must see. The starved and paused runs, which must give the idle run's
 Table 1 byte for byte, are in test_campaign.py; bench/faults.py runs every case on the short
 plan with figures.
 """

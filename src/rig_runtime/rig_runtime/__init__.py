@@ -1,11 +1,11 @@
 """Node runtime for the pitching-wing rig.
 
-One node API over two backends (rclpy on ROS machines, Cyclone DDS everywhere else, both
-speaking ROS 2's wire format), a graph launcher and a rosbag2 (MCAP) recorder.
+An rclpy node base class with the rig's contract (parameters, start barrier, anomalies), a graph
+launcher and a rosbag2 (MCAP) recorder.
 
 The names below load their module on first use (PEP 562), so that the light modules (the
 interface contract ``rig_runtime.interface``, the graph description ``rig_runtime.graph``,
-``rig_runtime.qos``) import without loading rosbags, Cyclone DDS or rclpy: the ROS launch
+``rig_runtime.qos``) import without loading rosbags or rclpy: the ROS launch
 files and the offline tools use them in processes that must not load a middleware.
 """
 

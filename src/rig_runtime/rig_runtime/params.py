@@ -29,8 +29,8 @@ class Parameter:
 
     ``min``/``max`` bound numbers (and every element of numeric lists); ``choices`` restricts
     strings. ``read_only`` parameters cannot change after start; a live one
-    (``read_only=False``) can be set while the node runs (``ros2 param set`` on the rclpy
-    backend) and is read by the node at each use (``node.params[name]``).
+    (``read_only=False``) can be set while the node runs (``ros2 param set``) and is
+    read by the node at each use (``node.params[name]``).
     """
 
     name: str
@@ -132,7 +132,9 @@ class ParameterSet:
 class _ParameterFileLoader(yaml.SafeLoader):
     """YAML as rcl reads parameter files: safe, plus ``!!python/tuple`` as a list. launch_ros
     writes the ``parameters=[{...}]`` of a launch file to a temporary file with ``yaml.dump``,
-    after turning every list into a tuple; rclpy nodes read those, so the DDS backend must."""
+    after turning every list into a tuple; rclpy nodes read those, and so must the runtime's
+    own reading of parameter files (resolve_parameters: the campaign's identifier
+    configuration, the config-file tests)."""
 
 
 _ParameterFileLoader.add_constructor(

@@ -84,7 +84,7 @@ def test_help_lists_parameters() -> None:
 
 def test_launch_ros_parameter_files_with_tuples_are_read(tmp_path: Path) -> None:
     """launch_ros dumps a launch file's parameter dict with yaml.dump after turning lists into
-    tuples; rclpy nodes read ``!!python/tuple`` as a list, and so must the DDS backend."""
+    tuples; rclpy nodes read ``!!python/tuple`` as a list, and so must resolve_parameters."""
     import yaml
 
     path = tmp_path / "launch_params_x"
