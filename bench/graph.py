@@ -261,21 +261,26 @@ def run_campaign(run_dir: Path, tree: Path | None) -> dict[str, Any]:
     return campaign_split(run_dir, started, ended)
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    """Byte-identical files (False when either is missing)."""
+    return a.exists() and b.exists() and a.read_bytes() == b.read_bytes()
+
+
 def compare_campaigns(args: argparse.Namespace) -> int:
     results: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
         base = Path(args.keep or tmp)
-        runs = [("before", Path(args.before).resolve())] if args.before else []
-        runs.append(("after", None))  # type: ignore[arg-type]
+        runs: list[tuple[str, Path | None]] = []
+        if args.before:
+            runs.append(("before", Path(args.before).resolve()))
+        runs.append(("after", None))
         for name, tree in runs:
             print(f"== {name}: aero-rig campaign --plan default ({tree or 'this checkout'})")
             results[name] = run_campaign(base / name, tree)
             print(json.dumps(results[name]))
         if args.before:
-            results["tables_identical"] = {
-                t: (base / "before" / t).read_bytes() == (base / "after" / t).read_bytes()
-                for t in TABLES
-            }
+            results["tables_identical"] = {t: _same_file(base / "before" / t, base / "after" / t)
+                                           for t in TABLES}  # fmt: skip
             print(f"tables byte-identical (cmp): {results['tables_identical']}")
     print(json.dumps(results))
     return 0 if all(results.get("tables_identical", {"": True}).values()) else 1

@@ -128,4 +128,26 @@ def test_the_ablation_runs_beside_and_gives_what_it_gives_alone() -> None:
     alone = identify(asm, plain, final=True)
     assert beside.no_clustering is not None
     assert beside.no_clustering.tables() == alone.tables()
-    assert beside.tables() == result.tables()  # and the clustered one is unchanged
+    # and the clustered identification is the one made without any ablation
+    without = identify(asm, dataclasses.replace(config, clustering_ablation=False), final=True)
+    for name in ("table1_all_levels", "table1_level1"):
+        assert beside.tables()[name] == without.tables()[name] == result.tables()[name]
+
+
+def test_the_ablation_runs_after_where_two_threads_cannot_share_numba(
+    monkeypatch: Any,
+) -> None:
+    """numba's workqueue layer aborts the process when two threads run parallel kernels at
+    once: there the ablation runs after the clustered fits, in the calling thread, and gives
+    the same tables."""
+    import threading
+
+    import numba
+
+    _, asm, result = _scenario(2)
+    monkeypatch.setattr(numba, "threading_layer", lambda: "workqueue")
+    threads: set[str] = set()
+    after = identify(asm, IdentificationConfig(scan=False, max_iter=40), final=True,
+                     log=lambda _m: threads.add(threading.current_thread().name))  # fmt: skip
+    assert threads == {threading.current_thread().name}
+    assert after.tables() == result.tables()

@@ -223,6 +223,10 @@ def _identify(
         )
         if ablation is not None:
             result.no_clustering, result.timings_s["no_clustering"] = ablation.result()
+        elif _clustering_dropped(result):  # it could not run beside (_ablation_beside)
+            result.no_clustering, result.timings_s["no_clustering"] = _ablation(
+                dataset, plain, client, held_out, say
+            )
         else:  # one cluster everywhere: every valid period was used, the same identification
             # (its config has no bootstrap, so neither has it)
             result.no_clustering = dataclasses.replace(result, config=plain, bootstrap=None)
@@ -242,25 +246,56 @@ def _start_ablation(
     say: Log,
 ) -> Future[tuple[IdentificationResult, float]] | None:
     """The identification without clustering, started in its own thread once the level models
-    say whether clustering dropped any period (None: not asked for, or nothing to ablate).
-    Its future gives (result, seconds). The caller holds one BLAS thread (`identify`) until
-    it has the result, so both threads' fits run with the same BLAS as one after the other
-    would, and give the same numbers."""
+    say whether clustering dropped any period (None: not asked for, nothing to ablate, or it
+    cannot run beside: `_ablation_beside`). Its future gives (result, seconds). The caller
+    holds one BLAS thread (`identify`) until it has the result, so both threads' fits run
+    with the same BLAS as one after the other would, and give the same numbers."""
     if not (final and config.clustering and config.clustering_ablation):
         return None
-    if not any(lv.clusters is not None and lv.clusters.k > 1 for lv in result.levels.values()):
+    if not _clustering_dropped(result) or not _ablation_beside(config, client):
         return None
     plain = dataclasses.replace(config, clustering=False, clustering_ablation=False, bootstrap=0)
-
-    def run() -> tuple[IdentificationResult, float]:
-        t0 = time.perf_counter()
-        done = identify(dataset, plain, final=True, client=client, held_out=held_out, log=say)
-        return done, time.perf_counter() - t0
-
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clustering_ablation")
-    future = pool.submit(run)
+    future = pool.submit(_ablation, dataset, plain, client, held_out, say)
     pool.shutdown(wait=False)  # the thread ends with its job; the caller waits on the future
     return future
+
+
+def _clustering_dropped(result: IdentificationResult) -> bool:
+    return any(lv.clusters is not None and lv.clusters.k > 1 for lv in result.levels.values())
+
+
+def _ablation(
+    dataset: Dataset,
+    plain: IdentificationConfig,
+    client: Any,
+    held_out: tuple[str, ...],
+    say: Log,
+) -> tuple[IdentificationResult, float]:
+    """The same pipeline without clustering, and its seconds; its messages say so."""
+    t0 = time.perf_counter()
+    done = identify(dataset, plain, final=True, client=client, held_out=held_out,
+                    log=lambda message: say(f"no clustering: {message}"))  # fmt: skip
+    return done, time.perf_counter() - t0
+
+
+def _ablation_beside(config: IdentificationConfig, client: Any) -> bool:
+    """Whether the ablation may run in a thread beside the clustered fits: numba's threading
+    layer must take parallel kernels from two threads at once (tbb or omp: the workqueue
+    layer aborts the process), and the fits must not start local Dask clusters (two at once
+    would race on ``__main__``, scan._workers_without_main_script, and oversubscribe the
+    cores)."""
+    local_cluster = client is None and not config.scan_scheduler and config.scan_workers != 1
+    if local_cluster and (config.scan or config.bootstrap > 0):
+        return False
+    import numba
+
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # no parallel kernel has run in this process yet: load them
+        warm_up()
+        layer = numba.threading_layer()
+    return layer in ("tbb", "omp")
 
 
 def _finish(dataset: Dataset, result: IdentificationResult, t_start: float) -> None:

@@ -5,10 +5,12 @@ A virtual environment is made from this one with everything but rclpy: each entr
 venv's site-packages is linked into it except ``rclpy`` itself, so ``import rclpy`` fails there
 as on a machine without the wheels (aarch64, CPython 3.14) and no sourced ROS 2. The verbs run
 in it as a user runs them: ``aero-rig fit`` on records, ``aero-rig view BAG``, ``aero-rig bag
-recover`` and, refused, ``aero-rig campaign``, ``aero-rig run`` and ``rig-launch``.
+recover`` and, refused, ``aero-rig campaign``, ``aero-rig run`` and ``aero-rig view live``
+(``rig-launch``'s refusal: test_rclpy_endpoints.py).
 """
 
 import importlib.util
+import os
 import subprocess
 import sys
 import sysconfig
@@ -29,6 +31,11 @@ def _sibling(name: str) -> ModuleType:
 
 
 pytestmark = pytest.mark.slow  # a venv and four CLI processes, one a fit
+
+
+def _env() -> dict[str, str]:
+    """This environment without what a sourced ROS 2 puts on the import path."""
+    return {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +59,9 @@ def python_without_rclpy(tmp_path_factory: pytest.TempPathFactory) -> Path:
         if entry.name == "rclpy" or entry.name.startswith(("rclpy-", "ros_jazzy_rclpy")):
             continue
         (theirs / entry.name).symlink_to(entry)
-    probe = subprocess.run([str(python), "-c", "import rclpy"], capture_output=True, timeout=60)
+    probe = subprocess.run(
+        [str(python), "-c", "import rclpy"], capture_output=True, timeout=60, env=_env()
+    )
     assert probe.returncode != 0, "rclpy still imports in the venv made without it"
     return python
 
@@ -65,6 +74,7 @@ def _aero_rig(python: Path, *args: str, cwd: Path) -> subprocess.CompletedProces
         text=True,
         timeout=600,
         cwd=cwd,
+        env=_env(),
     )
 
 

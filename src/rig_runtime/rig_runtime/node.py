@@ -268,6 +268,7 @@ class Node(rclpy.node.Node):
         self._cdr_subscriptions: list[CdrSubscription] = []
         self._delivered = 0
         self.exit_code = 0
+        self._closed = False
         self._shutdown_requested = False
         self._on_shutdown: list[Callable[[], None]] = []
         # Only a direct child of that launcher watches it (not a process that inherited the
@@ -305,7 +306,8 @@ class Node(rclpy.node.Node):
     def _declare_parameters(self, declared: Sequence[Parameter]) -> ParameterSet:
         """Declare every parameter with its descriptor; values from rcl's overrides
         (``--params-file``, ``-p``) are checked by :meth:`Parameter.validate` (types, ranges,
-        choices, list elements) first, so a bad one stops the node before any publisher."""
+        choices, list elements) first, so a bad one stops the node before any of its own
+        publishers exists (rclpy's /parameter_events and /rosout writers already do)."""
         from rclpy.exceptions import InvalidParameterValueException
 
         result = default_parameters(declared)
@@ -392,8 +394,12 @@ class Node(rclpy.node.Node):
         **kwargs: Any,
     ) -> Any:
         """rclpy's ``create_publisher``; with a ROS type name (``"std_msgs/msg/String"``) and a
-        named profile (qos.py) it returns a :class:`CdrPublisher` of the runtime's messages."""
+        named profile (qos.py) it returns a :class:`CdrPublisher` of the runtime's messages,
+        which the start barrier reports and which lingers at ``close``. Given a message
+        class, rclpy's own publisher (not reported to the barrier)."""
         if not isinstance(msg_type, str):
+            if depth is not None:
+                raise TypeError("depth= is for a named QoS profile; give rclpy a QoSProfile")
             return super().create_publisher(msg_type, topic, qos_profile, **kwargs)
         type_name = normalize_type_name(msg_type)
         profile = resolve_qos(qos_profile, depth)
@@ -435,6 +441,8 @@ class Node(rclpy.node.Node):
         receive_time_ns)`` (the recorder). ``required=True``: an input without which the
         node cannot work; the start barrier waits until it has a publisher."""
         if not isinstance(msg_type, str):
+            if depth is not None or required:
+                raise TypeError("depth= and required= are for endpoints by ROS type name")
             return super().create_subscription(
                 msg_type, topic, callback, qos_profile, raw=raw, **kwargs
             )
@@ -691,7 +699,16 @@ class Node(rclpy.node.Node):
 
     def close(self) -> None:
         """Run the shutdown callbacks, let the reliable writers linger, then destroy the node
-        and shut its context down."""
+        and shut its context down (once; the context is shut down whatever failed before)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._close_endpoints()
+        finally:
+            self._rig_context.try_shutdown()
+
+    def _close_endpoints(self) -> None:
         for callback in reversed(self._on_shutdown):
             try:
                 callback()
@@ -708,10 +725,11 @@ class Node(rclpy.node.Node):
                 WRITER_LINGER_S,
                 ", ".join(sorted(set(late))),
             )
-        self._rig_executor.remove_node(self)
-        self._rig_executor.shutdown()
-        self.destroy_node()
-        self._rig_context.try_shutdown()
+        try:
+            self._rig_executor.remove_node(self)
+            self._rig_executor.shutdown()
+        finally:
+            self.destroy_node()
 
 
 def _endpoint(entity: CdrPublisher | CdrSubscription, kind: str, gid: str, count: int) -> Endpoint:
