@@ -602,7 +602,12 @@ class Identifier:
 
     def close(self) -> None:
         if self.executor is not None:
-            self.executor.shutdown(wait=False, cancel_futures=True)
+            # Idle (the final identification done): wait for the worker, so that the
+            # executor's manager thread has closed its wakeup pipe before the interpreter's
+            # exit hook writes to it (CPython 3.11's concurrent.futures.process._python_exit
+            # raced with it: "Exception ignored ... Bad file descriptor"). A refit still
+            # running is cancelled without waiting for it.
+            self.executor.shutdown(wait=self.future is None, cancel_futures=True)
 
 
 def main(argv: list[str] | None = None) -> int:
