@@ -218,9 +218,7 @@ def _identify(
 
     # 5. The ablation's result (final identification only).
     if final and config.clustering and config.clustering_ablation:
-        plain = dataclasses.replace(
-            config, clustering=False, clustering_ablation=False, bootstrap=0
-        )
+        plain = _ablation_config(config)
         if ablation is not None:
             result.no_clustering, result.timings_s["no_clustering"] = ablation.result()
         elif _clustering_dropped(result):  # it could not run beside (_ablation_beside)
@@ -254,11 +252,15 @@ def _start_ablation(
         return None
     if not _clustering_dropped(result) or not _ablation_beside(config, client):
         return None
-    plain = dataclasses.replace(config, clustering=False, clustering_ablation=False, bootstrap=0)
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clustering_ablation")
-    future = pool.submit(_ablation, dataset, plain, client, held_out, say)
+    future = pool.submit(_ablation, dataset, _ablation_config(config), client, held_out, say)
     pool.shutdown(wait=False)  # the thread ends with its job; the caller waits on the future
     return future
+
+
+def _ablation_config(config: IdentificationConfig) -> IdentificationConfig:
+    """The ablation's configuration: the same pipeline on every valid period, no bootstrap."""
+    return dataclasses.replace(config, clustering=False, clustering_ablation=False, bootstrap=0)
 
 
 def _clustering_dropped(result: IdentificationResult) -> bool:

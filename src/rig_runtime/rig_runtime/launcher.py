@@ -191,10 +191,6 @@ class Launcher:
             return "all nodes finished"
         return None
 
-    def lease_s(self) -> float:
-        """The DDS participant lease of the graph's nodes (Fast DDS's default)."""
-        return PARTICIPANT_LEASE_S
-
     def stopped(self, now: float | None = None) -> dict[str, float]:
         """{node: seconds it has been stopped} for the nodes whose process is stopped now
         (first seen at one of these calls: call it about once a second)."""
@@ -248,7 +244,7 @@ class Launcher:
         try:
             self.start()
             deadline = None if duration_s is None else time.monotonic() + duration_s
-            lease_s = self.lease_s()
+            lease_s = PARTICIPANT_LEASE_S
             reported: set[str] = set()  # stopped nodes named past the lease
             checked = 0.0
             reason = None

@@ -85,20 +85,25 @@ def message_class(type_name: str) -> Any:
 
 
 @dataclass(eq=False)
-class CdrPublisher:
-    """An rclpy publisher of the runtime's messages: ``publish(msg)`` sends their CDR bytes."""
+class CdrEndpoint:
+    """What a reader or writer of the runtime's messages is: its rclpy entity (``handle``),
+    resolved topic, ROS type name and QoS profile."""
 
-    publisher: Any  # rclpy.publisher.Publisher
+    handle: Any  # rclpy.publisher.Publisher | rclpy.subscription.Subscription
     topic: str
     type_name: str
     profile: QosProfile
+
+
+class CdrPublisher(CdrEndpoint):
+    """An rclpy publisher of the runtime's messages: ``publish(msg)`` sends their CDR bytes."""
 
     def publish(self, msg: Any) -> None:
         self.publish_raw(serialize(msg))
 
     def publish_raw(self, data: bytes) -> None:
         try:
-            self.publisher.publish(bytes(data))
+            self.handle.publish(bytes(data))
         except Exception as exc:  # rclpy's RCLError: say which writer and why it gave up
             raise RuntimeError(
                 f"publishing on {self.topic} failed: a reader has not acknowledged for "
@@ -106,20 +111,14 @@ class CdrPublisher:
             ) from exc
 
     def subscription_count(self) -> int:
-        return int(self.publisher.get_subscription_count())
+        return int(self.handle.get_subscription_count())
 
 
-@dataclass(eq=False)
-class CdrSubscription:
+class CdrSubscription(CdrEndpoint):
     """An rclpy ``raw=True`` subscription delivering runtime messages (or the bytes)."""
 
-    subscription: Any  # rclpy.subscription.Subscription
-    topic: str
-    type_name: str
-    profile: QosProfile
-
     def publisher_count(self) -> int:
-        return int(self.subscription.get_publisher_count())
+        return int(self.handle.get_publisher_count())
 
 
 def _descriptor(p: Parameter) -> Any:
@@ -690,7 +689,7 @@ class Node(rclpy.node.Node):
                 continue
             remaining = max(deadline - time.monotonic(), 0.0)
             try:
-                acked = pub.publisher.wait_for_all_acked(Duration(nanoseconds=int(remaining * 1e9)))
+                acked = pub.handle.wait_for_all_acked(Duration(nanoseconds=int(remaining * 1e9)))
             except Exception:  # rclpy's RCLError: the writer cannot say
                 acked = False
             if not acked:
@@ -732,7 +731,7 @@ class Node(rclpy.node.Node):
             self.destroy_node()
 
 
-def _endpoint(entity: CdrPublisher | CdrSubscription, kind: str, gid: str, count: int) -> Endpoint:
+def _endpoint(entity: CdrEndpoint, kind: str, gid: str, count: int) -> Endpoint:
     return Endpoint(
         topic=entity.topic,
         kind=kind,
