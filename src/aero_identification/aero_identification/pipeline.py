@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from . import model_message as msg
 from .bla import bla_levels_db, estimate_bla
 from .bootstrap import Cell, replicate_spreads, resample_periods
 from .clustering import ClusterResult, period_clusters
@@ -737,8 +738,8 @@ def _validate_sine(rec: SineData, result: IdentificationResult) -> None:
 
     # Linear models predict deviations: centred on the record's measured means.
     for lin_level, errors, spreads, key in (
-        (own, result.errors_all, result.spreads_all, "BLA SS (own level)"),
-        (low, result.errors_level1, result.spreads_level1, "BLA SS (level 1)"),
+        (own, result.errors_all, result.spreads_all, msg.BLA_SS_OWN),
+        (low, result.errors_level1, result.spreads_level1, msg.BLA_SS_LEVEL1),
     ):
         if lin_level.bla is None or lin_level.linear is None:
             continue
@@ -749,8 +750,8 @@ def _validate_sine(rec: SineData, result: IdentificationResult) -> None:
         score(errors, spreads, "BLA SS", y_ss)
         preds[key] = y_ss
     for model, errors, spreads, key in (
-        (result.pnlss_all, result.errors_all, result.spreads_all, "PNLSS (all levels)"),
-        (result.pnlss_level1, result.errors_level1, result.spreads_level1, "PNLSS (level 1)"),
+        (result.pnlss_all, result.errors_all, result.spreads_all, msg.PNLSS_ALL),
+        (result.pnlss_level1, result.errors_level1, result.spreads_level1, msg.PNLSS_LEVEL1),
     ):
         if model is None:
             continue
@@ -759,13 +760,13 @@ def _validate_sine(rec: SineData, result: IdentificationResult) -> None:
         preds[key] = y_hat
     result.predictions.append(
         {
-            "name": f"sine {name} {rec.frequency_hz:g} Hz",
-            "level": name,
-            "frequency_hz": rec.frequency_hz,
-            "samples_per_period": rec.samples_per_period,
-            "alpha_deg": rec.u.tolist(),
-            "cl_measured": rec.y.tolist(),
-            **{f"cl_{k}": v.tolist() for k, v in preds.items()},
+            msg.NAME: f"sine {name} {rec.frequency_hz:g} Hz",
+            msg.LEVEL: name,
+            msg.FREQUENCY_HZ: rec.frequency_hz,
+            msg.SAMPLES_PER_PERIOD: rec.samples_per_period,
+            msg.ALPHA_DEG: rec.u.tolist(),
+            msg.series_key(msg.MEASURED): rec.y.tolist(),
+            **{msg.series_key(k): v.tolist() for k, v in preds.items()},
         }
     )
 

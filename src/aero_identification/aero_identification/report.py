@@ -14,6 +14,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from aero_identification import model_message as msg
 from aero_identification.bla import BLA
 from aero_identification.quality import data_quality_lines
 from aero_identification.results import IdentificationResult, bla_summary, modal_frequencies
@@ -301,20 +302,17 @@ def write_report(
         path.write_text(clustering_markdown(result.clustering_effect))
         written["clustering"] = path
     for pred in result.predictions:
-        tag = pred["name"].replace(" ", "_").replace(".", "p")
-        alpha = np.asarray(pred["alpha_deg"])
-        measured = np.asarray(pred["cl_measured"])
-        simulated = {
-            k[3:]: np.asarray(v)
-            for k, v in pred.items()
-            if k.startswith("cl_") and k != "cl_measured"
-        }
+        name = pred[msg.NAME]
+        tag = name.replace(" ", "_").replace(".", "p")
+        alpha = np.asarray(pred[msg.ALPHA_DEG])
+        series = {model: np.asarray(v) for model, v in msg.prediction_series(pred)}
+        measured = series.pop(msg.MEASURED)
         written[f"cl_alpha_{tag}"] = plot_cl_alpha(
-            alpha, measured, out / f"cl_alpha_{tag}.png", simulated, quasi_static, pred["name"]
+            alpha, measured, out / f"cl_alpha_{tag}.png", series, quasi_static, name
         )
         t = np.arange(len(measured)) / result.fs
         written[f"time_{tag}"] = plot_time_series(
-            t, measured, simulated, out / f"time_{tag}.png", title=pred["name"]
+            t, measured, series, out / f"time_{tag}.png", title=name
         )
     return written
 

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from . import model_message as msg
 from .bla import BLA
 from .clustering import ClusterResult
 from .config import IdentificationConfig
@@ -239,7 +240,7 @@ class IdentificationResult:
             "complete": self.complete,
             "source": self.source,
             "config": config_dict(self.config),
-            "levels": {lv.record.label: level_json(lv) for lv in self.levels.values()},
+            msg.LEVELS: {lv.record.label: level_json(lv) for lv in self.levels.values()},
             "models": {
                 "pnlss_all_levels": self.pnlss_all.to_dict() if self.pnlss_all else None,
                 "pnlss_level1": self.pnlss_level1.to_dict() if self.pnlss_level1 else None,
@@ -269,17 +270,17 @@ class IdentificationResult:
                 },
                 "held_out_levels": self.held_out_errors,
             },
-            "table1": {
-                "markdown": markdown("table1_all_levels"),
-                "markdown_level1": markdown("table1_level1"),
-                "markdown_no_clustering": markdown("table1_no_clustering"),
-                "markdown_held_out": markdown("validation_errors"),
+            msg.TABLE1: {
+                msg.TABLE1_ALL_LEVELS: markdown("table1_all_levels"),
+                msg.TABLE1_LEVEL1: markdown("table1_level1"),
+                msg.TABLE1_NO_CLUSTERING: markdown("table1_no_clustering"),
+                msg.TABLE1_HELD_OUT: markdown("validation_errors"),
             },
             "clustering_effect": self.clustering_effect,
-            "predictions": [_trim_prediction(p) for p in self.predictions],
-            "warnings": self.warnings,
-            "data_quality": self.data_quality,
-            "experiment": self.experiment,
+            msg.PREDICTIONS: [_trim_prediction(p) for p in self.predictions],
+            msg.WARNINGS: self.warnings,
+            msg.DATA_QUALITY: self.data_quality,
+            msg.EXPERIMENT: self.experiment,
             "timings_s": self.timings_s,
             "pnlss_scan": None
             if self.scan is None
@@ -337,7 +338,7 @@ def modal_frequencies(model: LinearStateSpace) -> list[float]:
 
 def level_json(lv: LevelResult) -> dict[str, Any]:
     rec = lv.record
-    entry: dict[str, Any] = {"name": lv.name, "offset_deg": rec.offset_deg, "role": lv.role}
+    entry: dict[str, Any] = {"name": lv.name, msg.OFFSET_DEG: rec.offset_deg, "role": lv.role}
     entry["periods_used"] = lv.periods_used
     entry["excluded_periods"] = lv.excluded
     if rec.data is not None:
@@ -349,23 +350,23 @@ def level_json(lv: LevelResult) -> dict[str, Any]:
     if rec.notes:
         entry["notes"] = list(rec.notes)
     if lv.bla is not None:
-        entry["bla"] = {
+        entry[msg.BLA] = {
             "method": lv.bla.method,
-            "freq_hz": lv.bla.freq.tolist(),
-            "G_re": lv.bla.G.real.tolist(),
-            "G_im": lv.bla.G.imag.tolist(),
-            "var_noise": lv.bla.var_noise.tolist(),
-            "var_total": lv.bla.var_total.tolist(),
-            "var_nl": lv.bla.var_nl.tolist(),
+            msg.FREQ_HZ: lv.bla.freq.tolist(),
+            msg.G_RE: lv.bla.G.real.tolist(),
+            msg.G_IM: lv.bla.G.imag.tolist(),
+            msg.VAR_NOISE: lv.bla.var_noise.tolist(),
+            msg.VAR_TOTAL: lv.bla.var_total.tolist(),
+            msg.VAR_NL: lv.bla.var_nl.tolist(),
             "summary_db": bla_summary(lv.bla),
         }
     if lv.clusters is not None:
-        entry["clusters"] = {
-            "labels": lv.clusters.labels.tolist(),
-            "k": int(lv.clusters.k),
-            "dominant": int(lv.clusters.dominant),
-            "sizes": [int(s) for s in lv.clusters.sizes],
-            "silhouette": {str(k): v for k, v in lv.clusters.silhouette.items()},
+        entry[msg.CLUSTERS] = {
+            msg.LABELS: lv.clusters.labels.tolist(),
+            msg.K: int(lv.clusters.k),
+            msg.DOMINANT: int(lv.clusters.dominant),
+            msg.SIZES: [int(s) for s in lv.clusters.sizes],
+            msg.SILHOUETTE: {str(k): v for k, v in lv.clusters.silhouette.items()},
         }
     if lv.linear is not None:
         entry["bla_ss"] = lv.linear.to_dict()
@@ -380,7 +381,7 @@ PAYLOAD_PERIODS = 2  # sine periods per prediction in the published model (C_l-a
 def _trim_prediction(pred: dict[str, Any]) -> dict[str, Any]:
     """The last PAYLOAD_PERIODS periods of a prediction, 5 decimals: the /identification/model
     payload stays small (the full records go to the report's figures)."""
-    n = PAYLOAD_PERIODS * int(pred.get("samples_per_period", 0))
+    n = PAYLOAD_PERIODS * int(pred.get(msg.SAMPLES_PER_PERIOD, 0))
     out: dict[str, Any] = {}
     for key, value in pred.items():
         if isinstance(value, list) and n:

@@ -10,17 +10,16 @@ import math
 import os
 import re
 import signal
-from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 import pytest
-from rerun.chunk import RrdReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
+from aero_identification import model_message as mm
 from aero_rig import view as rig_view
+from aero_rig.view.readback import Rrd
 from pressure_scanner.rig_geometry import RigGeometry
 from pressure_scanner.tap_cloud import fill_cloud
 from pressure_scanner.taps import load_taps
@@ -39,6 +38,7 @@ from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
 
 T0 = 1_700_000_000_000_000_000  # ns
+NEW_MODEL = "a model added later"
 FS = 200.0
 N = 200  # samples (1 s)
 NAN_CL_K = 57  # this coefficients sample is invalid (NaN)
@@ -81,13 +81,16 @@ def model_json(refit: int, predictions: list[str], k: int) -> str:
         },
         "2": {"offset_deg": 19.9, "bla": {"freq_hz": freq[:2], "G_re": [1, 1], "G_im": [0, 0]}},
     }
+    # The pipeline's keys (model_message); BLA SS has a gap (a non-finite value), and a model
+    # the view has no colour for is drawn as well.
     preds = [
         {
-            "name": name,
-            "alpha_deg": [5.0, 6.0, 7.0, 8.0],
-            "cl_measured": [0.5, 0.6, 0.7, 0.8],
-            "cl_bla_ss": [0.5, 0.61, None, 0.8],
-            "cl_pnlss": [0.5, 0.6, 0.71, 0.8],
+            mm.NAME: name,
+            mm.ALPHA_DEG: [5.0, 6.0, 7.0, 8.0],
+            mm.series_key(mm.MEASURED): [0.5, 0.6, 0.7, 0.8],
+            mm.series_key(mm.BLA_SS_OWN): [0.5, 0.61, None, 0.8],
+            mm.series_key(mm.PNLSS_ALL): [0.5, 0.6, 0.71, 0.8],
+            mm.series_key(NEW_MODEL): [0.4, 0.5, 0.6, 0.7],
         }
         for name in predictions
     ]
@@ -171,52 +174,6 @@ def write_bag(path: Path, storage: StoragePlugin) -> None:
 # -- reading a recording back ----------------------------------------------------------------
 
 
-class Rrd:
-    """Rows per entity of an .rrd's recording (temporal and static), and its blueprint."""
-
-    def __init__(self, path: Path) -> None:
-        reader = RrdReader(path)
-        self.rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
-        self.static: dict[str, list[dict[str, Any]]] = defaultdict(list)
-        for chunk in reader.stream().to_chunks():
-            batch = chunk.to_record_batch()
-            names = batch.schema.names
-            columns = {}
-            for name in names:
-                column = batch.column(name)
-                if pa.types.is_timestamp(column.type):
-                    column = column.cast(pa.int64())
-                columns[name] = column.to_pylist()
-            target = self.static if chunk.is_static else self.rows
-            for i in range(batch.num_rows):
-                target[chunk.entity_path].append({n: columns[n][i] for n in names})
-        for rows in self.rows.values():
-            rows.sort(key=lambda r: (r.get(rig_view.TIMELINE) or 0, r["rerun.controls.RowId"]))
-        self.view_names: set[str] = set()
-        for bp in reader.blueprints():
-            for chunk in reader.stream(store=bp).to_chunks():
-                batch = chunk.to_record_batch()
-                if "ViewBlueprint:display_name" in batch.schema.names:
-                    for value in batch.column("ViewBlueprint:display_name").to_pylist():
-                        self.view_names.update(value or [])
-
-    def column(self, entity: str, name: str) -> list[Any]:
-        return [row[name] for row in self.rows[entity] if row.get(name) is not None]
-
-    def scalars(self, entity: str) -> tuple[np.ndarray, np.ndarray]:
-        rows = [r for r in self.rows[entity] if r.get("Scalars:scalars") is not None]
-        times = np.array([r[rig_view.TIMELINE] for r in rows], dtype=np.int64)
-        return times, np.array([r["Scalars:scalars"][0] for r in rows])
-
-    def bars(self, entity: str, row: int = -1) -> tuple[np.ndarray, np.ndarray]:
-        rows = [r for r in self.rows[entity] if r.get("BarChart:values") is not None]
-        r = rows[row]
-        return (
-            np.array(r["BarChart:abscissa"][0]["buffer"]),
-            np.array(r["BarChart:values"][0]["buffer"]),
-        )
-
-
 EXPECTED_ENTITIES = {
     "/series/pitch/command",
     "/series/pitch/measured",
@@ -232,14 +189,16 @@ EXPECTED_ENTITIES = {
     "/clusters/level_0/cluster_0",
     "/clusters/level_0/cluster_1",
     "/cl_alpha/predictions/sine_level_0_1_0_hz/measured",
-    "/cl_alpha/predictions/sine_level_0_1_0_hz/bla_ss",
-    "/cl_alpha/predictions/sine_level_0_1_0_hz/pnlss",
-    "/cl_alpha/predictions/sine_level_0_0_4_hz/pnlss",
+    "/cl_alpha/predictions/sine_level_0_1_0_hz/bla_ss_own_level",
+    "/cl_alpha/predictions/sine_level_0_1_0_hz/pnlss_all_levels",
+    "/cl_alpha/predictions/sine_level_0_1_0_hz/a_model_added_later",
+    "/cl_alpha/predictions/sine_level_0_0_4_hz/pnlss_all_levels",
     "/model/table1",
     "/model/summary",
     "/events/segment",
     "/events/model",
     "/events/status",
+    "/events/view",
 }
 
 
@@ -306,11 +265,26 @@ def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StorageP
     pred = "/cl_alpha/predictions/sine_level_0_1_0_hz"
     measured = np.array(rrd.column(f"{pred}/measured", "LineStrips2D:strips")[0][0])
     np.testing.assert_allclose(measured, [[5, -5], [6, -6], [7, -7], [8, -8]], atol=1e-5)
-    assert len(rrd.column(f"{pred}/bla_ss", "LineStrips2D:strips")[0]) == 1  # 2 points kept
+    assert len(rrd.column(f"{pred}/bla_ss_own_level", "LineStrips2D:strips")[0]) == 1  # 2 kept
+    # Each model in its colour, named in the C_l–α view's title; the new model in a spare one.
+    for model, color in (*rig_view.PREDICTION_COLORS[:2], (NEW_MODEL, rig_view.SPARE_COLORS[0])):
+        colors = rrd.column(f"{pred}/{rig_view.slug(model)}", "LineStrips2D:colors")
+        assert colors[0] == [int.from_bytes(bytes([*color, 255]), "big")], model
+    (title,) = [v for v in rrd.blueprints[-1] if v.startswith("C_l–α")]
+    assert f"{mm.BLA_SS_OWN} (blue)" in title and f"{NEW_MODEL} (pink)" in title, title
+    # Each gap is named once on the view's log, with its field, though both models carried the
+    # 1 Hz one.
+    warnings = [t[0] for t in rrd.column("/events/view", "TextLog:text")]
+    gaps = [w for w in warnings if mm.series_key(mm.BLA_SS_OWN) in w]
+    assert gaps == [
+        f"/identification/model: predictions[sine level 0 {f} Hz]."
+        f"{mm.series_key(mm.BLA_SS_OWN)}: 1 of 4 values not finite"
+        for f in ("1.0", "0.4")
+    ]
     # The second model dropped a prediction and a cluster: both are cleared at its stamp.
     second_model = stamp(200)
     for entity in (
-        "/cl_alpha/predictions/sine_level_0_0_4_hz/pnlss",
+        "/cl_alpha/predictions/sine_level_0_0_4_hz/pnlss_all_levels",
         "/clusters/level_0/cluster_1",
     ):
         cleared = [r for r in rrd.rows[entity] if r.get("Clear:is_recursive") is not None]
@@ -318,8 +292,8 @@ def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StorageP
     assert rrd.rows["/frf/level_0/G_dB"][0][rig_view.TIMELINE] == first_model
     table = rrd.column("/model/table1", "TextDocument:text")
     assert [t[0] for t in table] == [
-        "| model | 1 Hz |\n|---|---|\n| PNLSS | 0.01 |",
-        "| model | 1 Hz |\n|---|---|\n| PNLSS | 0.02 |",
+        "## Table 1, models of all levels\n\n| model | 1 Hz |\n|---|---|\n| PNLSS | 0.01 |",
+        "## Table 1, models of all levels\n\n| model | 1 Hz |\n|---|---|\n| PNLSS | 0.02 |",
     ]
 
     # Events: segment edges at their own stamps, status only when it changes.
@@ -336,8 +310,15 @@ def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StorageP
     assert rrd.column("/events/status", "TextLog:level")[0] == ["WARN"]
 
     # The blueprint got one FRF and one cluster tab per level once the model named them.
-    assert {"Pitch [deg]", "C_l", "FRF level 0 [dB]", "FRF level 2 [dB]"} <= rrd.view_names
-    assert "Clusters level 0" in rrd.view_names
+    assert "C_l" in rrd.view_names
+    for head in ("Pitch [deg]", "FRF level 0:", "FRF level 2:", "Clusters level 0:"):
+        assert any(v.startswith(head) for v in rrd.view_names), (head, rrd.view_names)
+    # What the view received against the plan_end event's samples: nothing missed.
+    (report,) = [w[0] for w in rrd.column("/events/view", "TextLog:text") if "plan" in w[0]]
+    assert report == (
+        f"view: of {N} plan samples missed 0 commands, 0 states, 0 C_l and 0 tap samples; "
+        f"drew {N // 10} of {N // 10} Cp frames (0.00 % missed)"
+    )
 
 
 def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> None:
@@ -347,6 +328,13 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
     string = "std_msgs/msg/String"
     logger.on_model(new_message(string, data=json.dumps({"refit": 0})))
     logger.on_model(new_message(string, data=json.dumps({"refit": 1, "levels": {"1": {}}})))
+    # A model the view cannot wholly read: what is whole is drawn, the rest named once.
+    broken = json.loads(model_json(2, ["sine level 0 1.0 Hz"], 2))
+    del broken["stamp_ns"]  # at the time of the models before it
+    broken["levels"]["0"]["bla"]["G_im"] = [0.0]  # 1 value for 4 frequencies
+    broken["predictions"][0][mm.series_key(mm.PNLSS_ALL)] = [0.5, 0.6]  # 2 values for 4 angles
+    for _ in range(2):
+        logger.on_model(new_message(string, data=json.dumps(broken)))
     for bad in ("not json", "[1, 2]"):
         with pytest.raises(ValueError, match="identification/model"):
             logger.on_model(new_message(string, data=bad))
@@ -357,7 +345,21 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
     summaries = [t[0] for t in rrd.column("/model/summary", "TextDocument:text")]
     assert summaries[0].startswith("# Model refit 0") and "- level 1" in summaries[1]
     assert "/frf/level_1/G_dB" not in rrd.rows
-    assert "FRF level 1 [dB]" in rrd.view_names
+    assert any(v.startswith("FRF level 1:") for v in rrd.view_names)
+    model = "/identification/model"
+    assert [t[0] for t in rrd.column("/events/view", "TextLog:text")] == [
+        f"{model}: levels: missing",
+        f"{model}: predictions: missing",
+        f"{model}: table1: missing",
+        f"{model}: levels.0.bla.G_im: 1 values for 4 frequencies",
+        f"{model}: predictions[sine level 0 1.0 Hz].{mm.series_key(mm.BLA_SS_OWN)}: "
+        "1 of 4 values not finite",
+        f"{model}: predictions[sine level 0 1.0 Hz].{mm.series_key(mm.PNLSS_ALL)}: "
+        "2 values for 4 angles",
+    ]
+    assert "/frf/level_0/G_dB" not in rrd.rows and "/frf/level_2/G_dB" in rrd.rows
+    assert "/cl_alpha/predictions/sine_level_0_1_0_hz/pnlss_all_levels" not in rrd.rows
+    assert "/cl_alpha/predictions/sine_level_0_1_0_hz/measured" in rrd.rows
 
 
 def test_series_go_in_batches_at_their_stamps_and_none_is_held_back(
@@ -490,4 +492,4 @@ def test_view_node_records_what_it_receives_over_dds(
     np.testing.assert_allclose(f, [0.02, 0.06, 0.10, 0.14])
     status = rrd.column("/events/status", "TextLog:text")
     assert status[-1] == ["identifier: refit 1 done (periods=3)"]
-    assert "FRF level 2 [dB]" in rrd.view_names
+    assert any(v.startswith("FRF level 2:") for v in rrd.view_names)

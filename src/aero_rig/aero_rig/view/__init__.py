@@ -3,7 +3,16 @@
 
 The node module is not imported here: it needs rclpy, which ``view_bag`` does not."""
 
-from .blueprint import CL_SCALE, CP_X_SCALE, ENTITY, TIMELINE, make_blueprint
+from .blueprint import (
+    CL_SCALE,
+    CP_X_SCALE,
+    ENTITY,
+    PREDICTION_COLORS,
+    SPARE_COLORS,
+    TIMELINE,
+    make_blueprint,
+    slug,
+)
 from .logger import RigViewLogger, describe_segment
 from .recording import MODES, TOPICS, close_recording, open_recording, view_bag
 
@@ -12,6 +21,8 @@ __all__ = [
     "CP_X_SCALE",
     "ENTITY",
     "MODES",
+    "PREDICTION_COLORS",
+    "SPARE_COLORS",
     "TIMELINE",
     "TOPICS",
     "RigViewLogger",
@@ -19,5 +30,6 @@ __all__ = [
     "describe_segment",
     "make_blueprint",
     "open_recording",
+    "slug",
     "view_bag",
 ]

@@ -7,6 +7,8 @@ from typing import Any
 import numpy as np
 import rerun.blueprint as rrb
 
+from aero_identification import model_message as mm
+
 TIMELINE = "experiment_time"
 
 # Rerun's 2D views draw +y downwards (rerun-io/rerun#1387), so the two x–y plots are laid out in
@@ -29,6 +31,9 @@ ENTITY = {
     "segment": "/events/segment",
     "model_event": "/events/model",
     "status": "/events/status",
+    "adaptive": "/events/adaptive",
+    "data_quality": "/events/data_quality",
+    "view_event": "/events/view",
     "table1": "/model/table1",
     "summary": "/model/summary",
 }
@@ -39,7 +44,25 @@ GREEN = (44, 160, 44)
 RED = (214, 39, 40)
 GRAY = (127, 127, 127)
 PURPLE = (148, 103, 189)
-CLUSTER_COLORS = [BLUE, ORANGE, GREEN, RED, PURPLE, (140, 86, 75), (227, 119, 194)]
+BROWN = (140, 86, 75)
+PINK = (227, 119, 194)
+OLIVE = (188, 189, 34)
+CYAN = (23, 190, 207)
+CLUSTER_COLORS = [BLUE, ORANGE, GREEN, RED, PURPLE, BROWN, PINK]
+COLOR_NAMES = {
+    BLUE: "blue", ORANGE: "orange", GREEN: "green", RED: "red", GRAY: "gray", PURPLE: "purple",
+    BROWN: "brown", PINK: "pink", OLIVE: "olive", CYAN: "cyan",
+}  # fmt: skip
+# The C_l–α view's series (model_message.prediction_series): the measured loop and the models
+# of pipeline._validate_sine; a model added later takes the first spare colour.
+PREDICTION_COLORS = (
+    (mm.MEASURED, GRAY),
+    (mm.BLA_SS_OWN, BLUE),
+    (mm.BLA_SS_LEVEL1, PURPLE),
+    (mm.PNLSS_ALL, ORANGE),
+    (mm.PNLSS_LEVEL1, BROWN),
+)
+SPARE_COLORS = (PINK, OLIVE, CYAN, RED)
 
 
 def slug(text: Any) -> str:
@@ -56,31 +79,53 @@ def cl_alpha_to_view(alpha_deg: np.ndarray, cl: np.ndarray) -> tuple[np.ndarray,
     return np.asarray(alpha_deg), -CL_SCALE * np.asarray(cl)
 
 
-def make_blueprint(levels: Iterable[str] = ()) -> rrb.Blueprint:
-    """The layout: time series and events | Cp and FRFs | C_l–α, clusters and model tables."""
+def cl_alpha_title(series: Iterable[tuple[str, tuple[int, int, int]]]) -> str:
+    """The C_l–α view's title: each series drawn with its colour (the ones a model has sent)."""
+    drawn = [f"{name} ({COLOR_NAMES.get(color, 'rgb' + str(color))})" for name, color in series]
+    shown = ", ".join([*drawn, "live trail (green)"])
+    return f"C_l–α of the validation sines: {shown}"
+
+
+def make_blueprint(
+    levels: Iterable[str] = (), series: Iterable[tuple[str, tuple[int, int, int]]] = ()
+) -> rrb.Blueprint:
+    """The layout: time series and events | Cp and FRFs | C_l–α, clusters and model tables.
+    ``levels``: the model's levels (one FRF and one cluster tab each); ``series``: the C_l–α
+    series drawn so far with their colours (named in that view's title)."""
     levels = list(levels)
     frf_views: list[Any] = [
-        rrb.BarChartView(origin=f"/frf/level_{slug(lv)}", name=f"FRF level {lv} [dB]")
+        rrb.BarChartView(
+            origin=f"/frf/level_{slug(lv)}",
+            name=f"FRF level {lv}: |G| (blue), noise (gray), distortion (red) [dB] over f [Hz]",
+        )
         for lv in levels
-    ] or [rrb.BarChartView(origin="/frf", name="FRF [dB]")]
+    ] or [rrb.BarChartView(origin="/frf", name="FRF [dB] (after the first refit)")]
     cluster_views: list[Any] = [
-        rrb.BarChartView(origin=f"/clusters/level_{slug(lv)}", name=f"Clusters level {lv}")
+        rrb.BarChartView(
+            origin=f"/clusters/level_{slug(lv)}",
+            name=f"Clusters level {lv}: one bar per period, tallest the dominant cluster",
+        )
         for lv in levels
-    ] or [rrb.BarChartView(origin="/clusters", name="Clusters")]
+    ] or [rrb.BarChartView(origin="/clusters", name="Clusters (after the first refit)")]
     cp_x, cp_y = cp_to_view(np.array([-0.05, 1.05]), np.array([-3.2, 1.2]))
     ca_x, ca_y = cl_alpha_to_view(np.array([-6.0, 36.0]), np.array([-0.4, 2.2]))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.TimeSeriesView(origin="/series/pitch", name="Pitch [deg]"),
+                rrb.TimeSeriesView(
+                    origin="/series/pitch", name="Pitch [deg]: command (gray), measured (blue)"
+                ),
                 rrb.TimeSeriesView(origin="/series/cl", name="C_l"),
-                rrb.TextLogView(origin="/events", name="Events"),
+                rrb.TextLogView(
+                    origin="/events",
+                    name="Events: segments, adaptive decisions, status, data quality, view",
+                ),
                 row_shares=[2, 2, 1],
             ),
             rrb.Vertical(
                 rrb.Spatial2DView(
                     origin="/cp",
-                    name="−Cp over x/c (upper blue, lower orange)",
+                    name="−Cp over x/c, every 10th sample (upper blue, lower orange)",
                     visual_bounds=rrb.VisualBounds2D(
                         x_range=sorted(cp_x.tolist()), y_range=sorted(cp_y.tolist())
                     ),
@@ -90,7 +135,7 @@ def make_blueprint(levels: Iterable[str] = ()) -> rrb.Blueprint:
             rrb.Vertical(
                 rrb.Spatial2DView(
                     origin="/cl_alpha",
-                    name="C_l–α: measured (gray), BLA SS (blue), PNLSS (orange), live (green)",
+                    name=cl_alpha_title(series),
                     visual_bounds=rrb.VisualBounds2D(
                         x_range=sorted(ca_x.tolist()), y_range=sorted(ca_y.tolist())
                     ),

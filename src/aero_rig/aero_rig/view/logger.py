@@ -10,6 +10,8 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from aero_identification import model_message as mm
+from aero_identification.quality import data_quality_lines
 from pressure_scanner.rig_geometry import RigGeometry
 from pressure_scanner.tap_cloud import read_cloud
 from rig_runtime import stamp_to_ns
@@ -29,7 +31,9 @@ from .blueprint import (
     GRAY,
     GREEN,
     ORANGE,
+    PREDICTION_COLORS,
     RED,
+    SPARE_COLORS,
     TIMELINE,
     cl_alpha_to_view,
     cp_to_view,
@@ -37,11 +41,6 @@ from .blueprint import (
     slug,
 )
 
-PREDICTION_SERIES: tuple[tuple[str, str, tuple[int, int, int]], ...] = (
-    ("cl_measured", "measured", GRAY),
-    ("cl_bla_ss", "bla_ss", BLUE),
-)
-PREDICTION_SERIES += (("cl_pnlss", "pnlss", ORANGE),)
 STATUS_LEVELS = {0: "INFO", 1: "WARN", 2: "ERROR", 3: "WARN"}
 
 
@@ -158,15 +157,19 @@ class RigViewLogger:
         self.counts = dict.fromkeys(
             ("command", "state", "taps", "coefficients", "segment", "model", "status"), 0
         )
-        self.counts["cl_invalid"] = 0
+        self.counts.update(cl_invalid=0, taps_drawn=0, warnings=0)
+        self.plan_samples: int | None = None  # from the plan_end event
         self.last_ns: int | None = None
         self._alpha_by_stamp: OrderedDict[int, float] = OrderedDict()
         self._last_alpha: float | None = None
         self._trail: deque[tuple[int, float, float]] = deque()
-        self._levels: list[str] = []
         self._send_blueprint = send_blueprint
+        self._layout: tuple[list[str], list[str]] = ([], [])  # levels and series drawn
+        self._series_colors: dict[str, tuple[int, int, int]] = {}  # by model, in order seen
         self._model_entities: set[str] = set()
         self._status_seen: dict[str, tuple[Any, ...]] = {}
+        self._quality_line = ""
+        self._warned: set[str] = set()
         self._log_static()
         if send_blueprint:
             self.rec.send_blueprint(make_blueprint())
@@ -297,6 +300,7 @@ class RigViewLogger:
         if n % self.taps_decimation:
             return
         xyz, pressures = read_cloud(msg)
+        self.counts["taps_drawn"] += 1
         x_c = xyz[:, 0] / self.chord_m
         cp = pressures / self.q_pa
         self._set_time(stamp_to_ns(msg.header.stamp))
@@ -338,8 +342,11 @@ class RigViewLogger:
         if stamp_key and isinstance(event.get(stamp_key), int | float):
             t_ns = round(event[stamp_key] * 1e9)
         self._set_time(t_ns)
+        if edge == "plan_end" and isinstance(event.get("samples"), int):
+            self.plan_samples = event["samples"]
         level = "WARN" if edge in ("plan_aborted", "refused") else "INFO"
-        self.rec.log(ENTITY["segment"], rr.TextLog(describe_segment(event), level=level))
+        entity = ENTITY["adaptive"] if edge in ("decision", "refused") else ENTITY["segment"]
+        self.rec.log(entity, rr.TextLog(describe_segment(event), level=level))
 
     def on_status(self, msg: Any) -> None:
         self.counts["status"] += 1
@@ -359,67 +366,103 @@ class RigViewLogger:
     # -- model ---------------------------------------------------------------------------------
 
     def on_model(self, msg: Any) -> None:
+        """A model update: FRFs, clusters, predictions, Table 1, the summary and the data-quality
+        line. What cannot be drawn is named once on ``/events/view`` (`model_message.problems`)
+        and left out; the rest is drawn."""
         self.counts["model"] += 1
         model = json_object(msg.data, IDENTIFICATION_MODEL.name)
         stamp = model.get("stamp_ns")
         self._set_time(int(stamp) if isinstance(stamp, int | float) else None)
-        levels = model.get("levels") or {}
+        for problem in mm.problems(model):
+            self.warn(f"{IDENTIFICATION_MODEL.name}: {problem}")
+        levels = model.get(mm.LEVELS)
         if not isinstance(levels, dict):
             levels = {}
-        summary = [f"# Model refit {model.get('refit', '?')}", ""]
+        refit = model.get(mm.REFIT, "?")
+        summary = [f"# Model refit {refit}", ""]
         frf_paths: set[str] = set()
         cluster_paths: set[str] = set()
         for name, level in sorted(levels.items()):
             if not isinstance(level, dict):
                 continue
-            frf_paths |= self._log_frf(name, level.get("bla") or {})
-            paths, text = self._log_clusters(name, level.get("clusters") or {})
+            frf_paths |= self._log_frf(name, level.get(mm.BLA) or {})
+            paths, text = self._log_clusters(name, level.get(mm.CLUSTERS) or {})
             cluster_paths |= paths
-            offset = level.get("offset_deg")
+            offset = level.get(mm.OFFSET_DEG)
             head = f"- level {name}" + (f" (offset {offset:g}°)" if offset is not None else "")
             summary.append(head + (f": {text}" if text else ""))
         self._clear_missing("/frf/", frf_paths)
         self._clear_missing("/clusters/", cluster_paths)
         self._clear_missing("/cl_alpha/predictions/", self._log_predictions(model))
-        summary.append("")
+        quality = self._log_data_quality(model.get(mm.DATA_QUALITY))
+        summary += ["", quality, ""]
         summary.append(
-            "FRF variances as published by the identifier (var_noise, var_nl); "
-            "C_l–α plot: α [deg] right, C_l up."
+            "FRF: |G| and the noise and nonlinear-distortion variances as published by the "
+            "identifier, per excited line [dB]. C_l–α: α [deg] right, C_l up."
         )
         self.rec.log(
             ENTITY["summary"], rr.TextDocument("\n".join(summary), media_type="text/markdown")
         )
-        table = (model.get("table1") or {}).get("markdown")
-        if isinstance(table, str) and table.strip():
-            self.rec.log(ENTITY["table1"], rr.TextDocument(table, media_type="text/markdown"))
+        table = model.get(mm.TABLE1)
+        tables = [
+            f"## {title}\n\n{table[key]}"
+            for key, title in mm.TABLE1_TITLES.items()
+            if isinstance(table, dict) and isinstance(table.get(key), str) and table[key].strip()
+        ]
+        if tables:
+            self.rec.log(
+                ENTITY["table1"], rr.TextDocument("\n\n".join(tables), media_type="text/markdown")
+            )
+        predictions = model.get(mm.PREDICTIONS)
         self.rec.log(
             ENTITY["model_event"],
             rr.TextLog(
-                f"model refit {model.get('refit', '?')}: levels {sorted(levels)}, "
-                f"{len(model.get('predictions') or [])} predictions",
+                f"model refit {refit}: levels {sorted(levels)}, "
+                f"{len(predictions) if isinstance(predictions, list) else 0} predictions",
                 level="INFO",
             ),
         )
-        names = sorted(str(k) for k in levels)
-        if self._send_blueprint and names != self._levels:
-            self.rec.send_blueprint(make_blueprint(names))
-        self._levels = names
+        self._update_blueprint(sorted(str(k) for k in levels))
+
+    def _update_blueprint(self, levels: list[str]) -> None:
+        """Send the layout again when the levels or the prediction series have changed."""
+        layout = (levels, list(self._series_colors))
+        if self._send_blueprint and layout != self._layout:
+            self.rec.send_blueprint(make_blueprint(levels, self._series_colors.items()))
+        self._layout = layout
+
+    def _log_data_quality(self, quality: Any) -> str:
+        """The data-quality line (also on ``/events/data_quality`` when it changes)."""
+        if not isinstance(quality, dict):
+            return "data quality: not reported"
+        counts = ", ".join(
+            f"{name} {c.get('received', '?')} of {c.get('expected', '?')}"
+            for name, c in (quality.get("samples") or {}).items()
+            if isinstance(c, dict)
+        )
+        problems = data_quality_lines(quality) if quality.get("clean") is False else []
+        line = "data quality: " + ("not clean: " + "; ".join(problems) if problems else "clean")
+        line += f" (plan samples received: {counts})" if counts else ""
+        if line != self._quality_line:
+            self._quality_line = line
+            level = "WARN" if problems else "INFO"
+            self.rec.log(ENTITY["data_quality"], rr.TextLog(line, level=level))
+        return line
 
     def _log_frf(self, level: str, bla: dict[str, Any]) -> set[str]:
-        f = _float_array(bla.get("freq_hz"))
-        if f.size == 0:
-            return set()
-        g = _float_array(bla.get("G_re")) + 1j * _float_array(bla.get("G_im"))
-        if g.shape != f.shape:
-            raise ValueError(f"level {level}: G_re/G_im length differs from freq_hz")
+        f = _float_array(bla.get(mm.FREQ_HZ))
+        re, im = _float_array(bla.get(mm.G_RE)), _float_array(bla.get(mm.G_IM))
+        if f.size == 0 or not f.shape == re.shape == im.shape:
+            return set()  # named by model_message.problems
+        g = re + 1j * im
         steps = np.diff(np.sort(f))
         steps = steps[steps > 0]
         df = float(np.median(steps)) if steps.size else 0.04
         base = f"/frf/level_{slug(level)}"
         series = [("G_dB", _db(np.abs(g), power=False), 0.0, BLUE)]
         for key, name, shift, color in (
-            ("var_noise", "noise_dB", -0.25, GRAY),
-            ("var_nl", "nl_distortion_dB", 0.25, RED),
+            (mm.VAR_NOISE, "noise_dB", -0.25, GRAY),
+            (mm.VAR_NL, "nl_distortion_dB", 0.25, RED),
         ):
             v = _float_array(bla.get(key))
             if v.shape == f.shape:
@@ -438,14 +481,17 @@ class RigViewLogger:
         return paths
 
     def _log_clusters(self, level: str, clusters: dict[str, Any]) -> tuple[set[str], str]:
-        labels = clusters.get("labels")
+        labels = clusters.get(mm.LABELS)
         if not labels:
             return set(), ""
-        arr = np.array(labels, dtype=np.int64)
+        try:
+            arr = np.array(labels, dtype=np.int64)
+        except (TypeError, ValueError):
+            return set(), ""  # named by model_message.problems
         if arr.ndim != 2:
-            raise ValueError(f"level {level}: clusters.labels must be P x M, got {arr.shape}")
+            return set(), ""
         n_periods, n_real = arr.shape
-        dominant = clusters.get("dominant")
+        dominant = clusters.get(mm.DOMINANT)
         # Periods in time order: realization by realization, period by period.
         order = arr.T.reshape(-1)
         index = np.arange(1, order.size + 1)
@@ -464,26 +510,78 @@ class RigViewLogger:
             )
             paths.add(path)
         rows = "; ".join(f"r{m}: {' '.join(map(str, arr[:, m]))}" for m in range(n_real))
-        text = f"k = {clusters.get('k', '?')}, dominant {dominant}, labels per period {rows}"
+        text = f"k = {clusters.get(mm.K, '?')}, dominant {dominant}, labels per period {rows}"
         return paths, text + f" ({n_periods} periods x {n_real} realizations)"
 
+    def _series_color(self, model: str) -> tuple[int, int, int]:
+        """A model's colour: fixed for the known models, the next free one for a new model."""
+        if model not in self._series_colors:
+            known = dict(PREDICTION_COLORS)
+            spare = [c for c in SPARE_COLORS if c not in self._series_colors.values()]
+            self._series_colors[model] = known.get(model) or (spare or SPARE_COLORS)[0]
+        return self._series_colors[model]
+
     def _log_predictions(self, model: dict[str, Any]) -> set[str]:
+        """Every C_l series of every validation sine, one strip entity per model and sine."""
         paths = set()
-        for i, pred in enumerate(model.get("predictions") or []):
+        predictions = model.get(mm.PREDICTIONS)
+        for i, pred in enumerate(predictions if isinstance(predictions, list) else []):
             if not isinstance(pred, dict):
                 continue
-            alpha = _float_array(pred.get("alpha_deg"))
-            base = f"/cl_alpha/predictions/{slug(pred.get('name', f'prediction {i}'))}"
-            for key, name, color in PREDICTION_SERIES:
-                cl = _float_array(pred.get(key))
+            alpha = _float_array(pred.get(mm.ALPHA_DEG))
+            base = f"/cl_alpha/predictions/{slug(pred.get(mm.NAME, f'prediction {i}'))}"
+            for name, values in mm.prediction_series(pred):
+                try:
+                    cl = _float_array(values)
+                except (TypeError, ValueError):
+                    continue  # named by model_message.problems
                 if cl.size == 0 or cl.shape != alpha.shape:
                     continue
                 x, y = cl_alpha_to_view(alpha, cl)
-                path = f"{base}/{name}"
-                radius = -2.0 if name == "measured" else -1.0
-                self.rec.log(path, rr.LineStrips2D(finite_runs(x, y), colors=color, radii=radius))
+                path = f"{base}/{slug(name)}"
+                color = self._series_color(name)
+                radius = -2.0 if name == mm.MEASURED else -1.0
+                strips = finite_runs(x, y)
+                labels = [name] * len(strips)  # shown on hover: the legend of each strip
+                self.rec.log(
+                    path, rr.LineStrips2D(strips, colors=color, radii=radius, labels=labels)
+                )
                 paths.add(path)
         return paths
+
+    def warn(self, text: str) -> None:
+        """A warning on the view's ``/events/view`` log, once per subject (the text up to its
+        first ': ', e.g. the topic and field)."""
+        subject = text.rsplit(": ", 1)[0]
+        self.counts["warnings"] += 1
+        if subject in self._warned:
+            return
+        self._warned.add(subject)
+        self.rec.log(ENTITY["view_event"], rr.TextLog(text, level="WARN"))
+
+    def report(self) -> str:
+        """What the view received and drew against the plan's samples (known from the
+        ``plan_end`` event), also logged on ``/events/view``: the samples it missed and the
+        tap frames it should have drawn but did not."""
+        c = self.counts
+        planned = self.plan_samples
+        if planned is None:
+            line = (
+                f"view: received {c['command']} commands, {c['state']} states, "
+                f"{c['coefficients']} C_l and {c['taps']} tap samples, drew {c['taps_drawn']} "
+                "Cp frames (the plan's end was not seen: nothing to compare with)"
+            )
+        else:
+            frames = -(-planned // self.taps_decimation)
+            missed = {k: max(planned - c[k], 0) for k in ("command", "state", "coefficients")}
+            line = (
+                f"view: of {planned} plan samples missed {missed['command']} commands, "
+                f"{missed['state']} states, {missed['coefficients']} C_l and "
+                f"{max(planned - c['taps'], 0)} tap samples; drew {c['taps_drawn']} of {frames} "
+                f"Cp frames ({100.0 * max(frames - c['taps_drawn'], 0) / frames:.2f} % missed)"
+            )
+        self.rec.log(ENTITY["view_event"], rr.TextLog(line, level="INFO"))
+        return line
 
     def flush(self, timeout_s: float = 10.0) -> None:
         """Send the buffered series, then wait until the recording has written everything."""
@@ -494,6 +592,8 @@ class RigViewLogger:
 def describe_segment(event: dict[str, Any]) -> str:
     """One line for a segment event: ``start multisine level 0 realization 1 period 2 …``."""
     edge = event.get("event", "?")
+    if edge in ("decision", "refused"):
+        return describe_decision(event)
     if edge not in ("start", "end"):
         extra = {k: v for k, v in event.items() if k != "event"}
         return f"{edge} {json.dumps(extra, sort_keys=True)}"
@@ -509,3 +609,18 @@ def describe_segment(event: dict[str, Any]) -> str:
     if event.get("index") is not None:
         parts.append(f"[segment {event['index']}]")
     return " ".join(parts)
+
+
+def describe_decision(event: dict[str, Any]) -> str:
+    """One line for an adaptive run's decision (multisine_gen.revision, the generator's answer to
+    the identifier's request): ``level 0 after sample 4095: end_realization -> revision 1 …``."""
+    edge = event.get("event", "?")
+    request = event.get("request", "?")
+    head = f"level {event.get('level', '?')} after sample {event.get('after_k', '?')}: {request}"
+    reason = f" ({event['reason']})" if event.get("reason") else ""
+    if edge == "refused":
+        return f"refused {head}{reason}: {event.get('why', '?')}"
+    change = event.get("change")
+    if not change:
+        return f"{head}{reason}: plan unchanged"
+    return f"{head}{reason} -> revision {event.get('revision', '?')}: {change}"

@@ -121,6 +121,7 @@ class View:
                 handler(msg)
             except (ValueError, KeyError, TypeError) as exc:
                 self.errors += 1
+                self.logger.warn(f"{topic}: {exc}")
                 if self.errors <= 20 or self.errors % 1000 == 0:
                     self.node.logger.warning("%s: %s (%d bad messages)", topic, exc, self.errors)
 
@@ -132,6 +133,7 @@ class View:
 
     def close(self) -> None:
         self.log_stats()
+        self.node.logger.info("%s", self.logger.report())
         self.logger.send_series()
         close_recording(self.rec)
 

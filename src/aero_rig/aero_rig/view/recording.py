@@ -137,7 +137,6 @@ def view_bag(
                     conns.append((conn, getattr(view, TOPICS[topic][1])))
             handlers = {c.id: h for c, h in conns}
             serialized = {c.id for c, h in conns if takes_cdr(h.__name__)}
-            errors = 0
             for conn, _t, raw in reader.messages(connections=[c for c, _ in conns]):
                 try:
                     if conn.id in serialized:
@@ -145,9 +144,8 @@ def view_bag(
                     else:
                         handlers[conn.id](reader.deserialize(raw, conn.msgtype))
                 except ValueError as exc:
-                    errors += 1
-                    if errors <= 20:
-                        rec.log("/events/view", rr.TextLog(f"{conn.topic}: {exc}", level="WARN"))
+                    view.warn(f"{conn.topic}: {exc}")
+        view.report()
         view.send_series()
     finally:
         close_recording(rec)

@@ -1,0 +1,72 @@
+"""An .rrd read back with Rerun's own reader (``rerun.chunk.RrdReader``, rerun 0.41): rows per
+entity path, as a viewer loads them, and the views of each blueprint sent. For tests and
+``bench/`` (what a recording holds), not for the live path."""
+
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+from rerun.chunk import RrdReader
+
+from .blueprint import TIMELINE
+
+
+class Rrd:
+    """Rows per entity of an .rrd's recording (temporal and static), and its blueprint."""
+
+    def __init__(self, path: Path) -> None:
+        reader = RrdReader(path)
+        self.rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        self.static: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        for chunk in reader.stream().to_chunks():
+            batch = chunk.to_record_batch()
+            names = batch.schema.names
+            columns = {}
+            for name in names:
+                column = batch.column(name)
+                if pa.types.is_timestamp(column.type):
+                    column = column.cast(pa.int64())
+                columns[name] = column.to_pylist()
+            target = self.static if chunk.is_static else self.rows
+            for i in range(batch.num_rows):
+                target[chunk.entity_path].append({n: columns[n][i] for n in names})
+        for rows in self.rows.values():
+            rows.sort(key=lambda r: (r.get(TIMELINE) or 0, r["rerun.controls.RowId"]))
+        # The views' names of each blueprint sent, in the order sent (a row id is a TUID: its
+        # first 8 bytes are its time, big-endian), and of all of them.
+        sent: list[tuple[bytes, set[str]]] = []
+        for bp in reader.blueprints():
+            names: set[str] = set()
+            first = b"\xff" * 16
+            for chunk in reader.stream(store=bp).to_chunks():
+                batch = chunk.to_record_batch()
+                first = min(first, *batch.column("rerun.controls.RowId").to_pylist())
+                if "ViewBlueprint:display_name" in batch.schema.names:
+                    for value in batch.column("ViewBlueprint:display_name").to_pylist():
+                        names.update(value or [])
+            sent.append((first, names))
+        self.blueprints = [names for _, names in sorted(sent, key=lambda item: item[0])]
+        self.view_names: set[str] = set().union(*self.blueprints)
+
+    def column(self, entity: str, name: str) -> list[Any]:
+        return [row[name] for row in self.rows[entity] if row.get(name) is not None]
+
+    def scalars(self, entity: str) -> tuple[np.ndarray, np.ndarray]:
+        rows = [r for r in self.rows[entity] if r.get("Scalars:scalars") is not None]
+        times = np.array([r[TIMELINE] for r in rows], dtype=np.int64)
+        return times, np.array([r["Scalars:scalars"][0] for r in rows])
+
+    def bars(self, entity: str, row: int = -1) -> tuple[np.ndarray, np.ndarray]:
+        rows = [r for r in self.rows[entity] if r.get("BarChart:values") is not None]
+        r = rows[row]
+        return (
+            np.array(r["BarChart:abscissa"][0]["buffer"]),
+            np.array(r["BarChart:values"][0]["buffer"]),
+        )
+
+    def counts(self) -> dict[str, int]:
+        """Rows per entity path (temporal and static), sorted by path."""
+        paths = sorted({*self.rows, *self.static})
+        return {p: len(self.rows.get(p, [])) + len(self.static.get(p, [])) for p in paths}
