@@ -13,14 +13,17 @@ process timestamps the arrival of each /pitch/command sample and of its /wing/co
 sample (same stamp): end-to-end latency p50/p99.
 
     .venv/bin/python bench/graph.py [--plan short] [--latency-seconds 20] [--view]
-    .venv/bin/python bench/graph.py --campaign [--before TREE]
+    .venv/bin/python bench/graph.py --campaign [--before TREE] [--view]
 
 ``--campaign`` runs ``aero-rig campaign --plan default`` as a user does (asynchronous Fast DDS
 publication, no view) and splits its wall time, from the node logs, into the start (processes
 up, start barrier), streaming (barrier to the generator's plan end) and the final
 identification (plan end to the report). ``--before TREE`` first runs the same campaign with the
 code of another checkout (its ``src/*`` on PYTHONPATH, this venv), so that before and after are
-measured in one run, and compares their tables byte for byte.
+measured in one run, and compares their tables byte for byte. With ``--view`` the campaign runs
+with ``--rerun save``: ``view`` gives what the view missed against the plan (its last report:
+pitch and C_l samples, tap frames drawn) and ``rrd_rows`` the rows of each entity path of the
+finished ``campaign.rrd``, read back with Rerun's reader.
 
 Last line: JSON {"rclpy": {...}} (or {"before": ..., "after": ..., "tables_identical": ...}
 with ``--campaign``), with real_time_factor, wall_s, samples, samples_lost,
@@ -131,6 +134,7 @@ def throughput(plan: str, run_dir: Path, view: bool = False) -> dict[str, Any]:
         extra["view_received"] = {
             k: int(v) for k, v in (item.split("=") for item in counts[-1].split())
         }
+        extra.update(view_figures(run_dir))
     return {
         **extra,
         "wall_s": round(wall, 2),
@@ -246,19 +250,52 @@ def campaign_split(run_dir: Path, started: float, ended: float) -> dict[str, Any
     }
 
 
-def run_campaign(run_dir: Path, tree: Path | None) -> dict[str, Any]:
-    """``aero-rig campaign --plan default`` (this checkout, or ``tree``'s code), timed."""
+VIEW_REPORT = re.compile(
+    r"view: of (?P<planned>\d+) plan samples missed (?P<command>\d+) commands, "
+    r"(?P<state>\d+) states, (?P<coefficients>\d+) C_l and (?P<taps>\d+) tap samples; "
+    r"drew (?P<drawn>\d+) of (?P<frames>\d+) Cp frames"
+)
+
+
+def view_figures(run_dir: Path) -> dict[str, Any]:
+    """What the view missed (its report at shutdown, logs/view.log) and the .rrd's rows."""
+    from aero_rig.view.readback import Rrd
+
+    reports = VIEW_REPORT.findall((run_dir / "logs" / "view.log").read_text(errors="replace"))
+    if not reports:
+        raise RuntimeError(f"{run_dir / 'logs' / 'view.log'}: no report of the view")
+    planned, command, state, cl, taps, drawn, frames = map(int, reports[-1])
+    return {
+        "view": {
+            "plan_samples": planned,
+            "missed_commands": command,
+            "missed_states": state,
+            "missed_cl": cl,
+            "missed_tap_samples": taps,
+            "cp_frames_drawn": drawn,
+            "cp_frames_planned": frames,
+            "cp_frames_missed_percent": round(100.0 * (frames - drawn) / frames, 3),
+        },
+        "rrd_rows": Rrd(run_dir / "campaign.rrd").counts(),
+    }
+
+
+def run_campaign(run_dir: Path, tree: Path | None, view: bool = False) -> dict[str, Any]:
+    """``aero-rig campaign --plan default`` (this checkout, or ``tree``'s code), timed; with
+    ``view``, ``--rerun save`` and what the view missed."""
     env = dict(os.environ)
     if tree is not None:
         env["PYTHONPATH"] = os.pathsep.join(str(p) for p in sorted((tree / "src").glob("*")))
     cmd = [str(Path(sys.executable).with_name("aero-rig")), "campaign", "--plan", "default"]
+    cmd += ["--rerun", "save"] if view else []
     started = time.time()
     proc = subprocess.run([*cmd, "--out", str(run_dir), "--quiet"], env=env, text=True,
                           capture_output=True, timeout=3600)  # fmt: skip
     ended = time.time()
     if proc.returncode != 0:
         raise RuntimeError(f"campaign failed ({proc.returncode}): {proc.stderr[-3000:]}")
-    return campaign_split(run_dir, started, ended)
+    figures = campaign_split(run_dir, started, ended)
+    return figures | (view_figures(run_dir) if view else {})
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -276,7 +313,7 @@ def compare_campaigns(args: argparse.Namespace) -> int:
         runs.append(("after", None))
         for name, tree in runs:
             print(f"== {name}: aero-rig campaign --plan default ({tree or 'this checkout'})")
-            results[name] = run_campaign(base / name, tree)
+            results[name] = run_campaign(base / name, tree, args.view)
             print(json.dumps(results[name]))
         if args.before:
             results["tables_identical"] = {t: _same_file(base / "before" / t, base / "after" / t)

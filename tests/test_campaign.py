@@ -3,6 +3,7 @@ identification; the small plan (conftest.small_plan) where a run must lose nothi
 the idle run's tables under load or after the identifier's kill."""
 
 import json
+import math
 import os
 import re
 import shutil
@@ -215,16 +216,62 @@ def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
     assert not missing, f"{len(missing)} command samples have no coefficients sample"
 
 
-def test_rrd_holds_logged_entities(campaign) -> None:
-    run, _ = campaign
-    rrd = run / "campaign.rrd"
-    assert rrd.exists() and rrd.stat().st_size > 10_000
-    from rerun.chunk import RrdReader
+def test_every_view_of_the_rrd_holds_what_the_identification_sent(campaign) -> None:
+    """The campaign's .rrd, read back with Rerun's reader: every entity the final blueprint lays
+    out holds data, and the model entities hold what models.json says, model by model."""
+    from aero_identification import model_message as mm
+    from aero_rig.view import slug
+    from aero_rig.view.readback import Rrd
 
-    paths = {str(chunk.entity_path) for chunk in RrdReader(rrd).stream().to_chunks()}
-    assert any(p.startswith("/series/") for p in paths)
-    assert any(p.startswith("/cp/") for p in paths)
-    assert any(p.startswith("/frf/") for p in paths)
+    run, proc = campaign
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    rrd = Rrd(run / "campaign.rrd")
+    model = json.loads((run / "models.json").read_text())
+    rows = rrd.counts()
+    for entity in ("/series/pitch/command", "/series/pitch/measured", "/series/cl",
+                   "/cp/upper", "/cp/lower", "/cp/taps", "/cl_alpha/live", "/events/segment",
+                   "/events/model", "/events/status", "/model/summary"):  # fmt: skip
+        assert rows.get(entity), entity
+    # Each model's prediction of each validation sine: the final model's four, and the measured.
+    assert len(model[mm.PREDICTIONS]) == 4
+    for pred in model[mm.PREDICTIONS]:
+        series = dict(mm.prediction_series(pred))
+        assert set(series) == {mm.MEASURED, *mm.MODELS}, series.keys()
+        for name, values in series.items():
+            entity = f"/cl_alpha/predictions/{slug(pred[mm.NAME])}/{slug(name)}"
+            strips = rrd.column(entity, "LineStrips2D:strips")
+            assert strips, entity
+            drawn = sum(len(strip) for strip in strips[-1])
+            assert drawn == sum(math.isfinite(v) for v in values) > 0, entity
+    # The FRF with its noise and distortion, and the cluster labels, of each level.
+    for label, level in model[mm.LEVELS].items():
+        for part in ("G_dB", "noise_dB", "nl_distortion_dB"):
+            _, values = rrd.bars(f"/frf/level_{slug(label)}/{part}")
+            assert values.size > 0, (label, part)
+        labels = np.array(level[mm.CLUSTERS][mm.LABELS])
+        shown = [p for p in rows if p.startswith(f"/clusters/level_{slug(label)}/")
+                 and rrd.rows[p] and "BarChart:values" in rrd.rows[p][-1]]  # fmt: skip
+        drawn = sum(rrd.bars(path)[1].size for path in shown)
+        assert drawn == labels.size, label
+    # Table 1 with its spreads, as the report has it; the data-quality line; no warnings.
+    table = rrd.column("/model/table1", "TextDocument:text")[-1][0]
+    assert model[mm.TABLE1][mm.TABLE1_ALL_LEVELS] in table and " ± " in table
+    assert model[mm.TABLE1][mm.TABLE1_LEVEL1] in table
+    quality = rrd.column("/events/data_quality", "TextLog:text")[-1][0]
+    assert quality.startswith("data quality: clean (plan samples received: pitch "), quality
+    (report,) = [t[0] for t in rrd.column("/events/view", "TextLog:text")]
+    assert re.fullmatch(
+        r"view: of \d+ plan samples missed 0 commands, 0 states, 0 C_l and \d+ tap samples; "
+        r"drew \d+ of \d+ Cp frames \(\d+\.\d\d % missed\)",
+        report,
+    ), report
+    # The last blueprint names what is drawn: each model's colour, a tab per level.
+    views = rrd.blueprints[-1]
+    (title,) = [v for v in views if v.startswith("C_l–α")]
+    assert all(f"{name} (" in title for name in mm.MODELS), title
+    for label in model[mm.LEVELS]:
+        assert any(v.startswith(f"FRF level {label}:") for v in views), views
+        assert any(v.startswith(f"Clusters level {label}:") for v in views), views
 
 
 def test_pnlss_beats_linear_state_space_at_highest_offset(campaign) -> None:
@@ -525,6 +572,7 @@ def adaptive_campaign(
     run = tmp_path_factory.mktemp("adaptive") / "run"
     proc = _aero_rig(
         *("campaign", "--plan", "short", "--adaptive", *WING, "--out", str(run), "--quiet"),
+        *("--rerun", "save"),
         *TIMEOUT_600,
         env=graph_env(),
         timeout=700,
@@ -584,6 +632,13 @@ def test_adaptive_campaign_is_clean_and_its_bag_reproduces_the_executed_plan(
     assert all(d["reason"] for d in changes)
     assert len(commands) == executed.total_samples
     np.testing.assert_allclose(commands, executed.command_deg(), atol=1e-9)
+    # The view shows every decision, in order, on its events log.
+    from aero_rig.view import describe_segment
+    from aero_rig.view.readback import Rrd
+
+    shown = [t[0] for t in Rrd(run / "campaign.rrd").column("/events/adaptive", "TextLog:text")]
+    assert shown == [describe_segment(d) for d in decisions]
+    assert sum(" -> revision " in line for line in shown) == executed.revision
     # The bag alone gives the campaign's report: the same tables, the same account.
     fit = _aero_rig("fit", str(run / "bag"), "--out", str(tmp_path / "fit"), env=graph_env(),
                     timeout=600)  # fmt: skip
