@@ -270,7 +270,7 @@ def test_every_view_of_the_rrd_holds_what_the_identification_sent(campaign) -> N
     (title,) = [v for v in views if v.startswith("C_l–α")]
     assert all(f"{name} (" in title for name in mm.MODELS), title
     for label in model[mm.LEVELS]:
-        assert any(v.startswith(f"FRF level {label}:") for v in views), views
+        assert any(v.startswith(f"FRF level {label} [dB]") for v in views), views
         assert any(v.startswith(f"Clusters level {label}:") for v in views), views
 
 

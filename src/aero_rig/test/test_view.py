@@ -311,8 +311,12 @@ def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StorageP
 
     # The blueprint got one FRF and one cluster tab per level once the model named them.
     assert "C_l" in rrd.view_names
-    for head in ("Pitch [deg]", "FRF level 0:", "FRF level 2:", "Clusters level 0:"):
+    for head in ("Pitch [deg]", "FRF level 0 [dB]", "FRF level 2 [dB]", "Clusters level 0:"):
         assert any(v.startswith(head) for v in rrd.view_names), (head, rrd.view_names)
+    # Opened with no clicks, every blueprint's time cursor follows the newest data (so a
+    # finished recording shows its end state; PlayState 3 is "following").
+    following = {"timeline": rig_view.TIMELINE, "play_state": 3}
+    assert rrd.time_panels and all(panel == following for panel in rrd.time_panels)
     # What the view received against the plan_end event's samples: nothing missed.
     (report,) = [w[0] for w in rrd.column("/events/view", "TextLog:text") if "plan" in w[0]]
     assert report == (
@@ -345,7 +349,7 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
     summaries = [t[0] for t in rrd.column("/model/summary", "TextDocument:text")]
     assert summaries[0].startswith("# Model refit 0") and "- level 1" in summaries[1]
     assert "/frf/level_1/G_dB" not in rrd.rows
-    assert any(v.startswith("FRF level 1:") for v in rrd.view_names)
+    assert any(v.startswith("FRF level 1 [dB]") for v in rrd.view_names)
     model = "/identification/model"
     assert [t[0] for t in rrd.column("/events/view", "TextLog:text")] == [
         f"{model}: levels: missing",
@@ -492,4 +496,4 @@ def test_view_node_records_what_it_receives_over_dds(
     np.testing.assert_allclose(f, [0.02, 0.06, 0.10, 0.14])
     status = rrd.column("/events/status", "TextLog:text")
     assert status[-1] == ["identifier: refit 1 done (periods=3)"]
-    assert any(v.startswith("FRF level 2:") for v in rrd.view_names)
+    assert any(v.startswith("FRF level 2 [dB]") for v in rrd.view_names)

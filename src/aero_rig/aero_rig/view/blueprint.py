@@ -89,21 +89,25 @@ def cl_alpha_title(series: Iterable[tuple[str, tuple[int, int, int]]]) -> str:
 def make_blueprint(
     levels: Iterable[str] = (), series: Iterable[tuple[str, tuple[int, int, int]]] = ()
 ) -> rrb.Blueprint:
-    """The layout: time series and events | Cp and FRFs | C_l–α, clusters and model tables.
-    ``levels``: the model's levels (one FRF and one cluster tab each); ``series``: the C_l–α
-    series drawn so far with their colours (named in that view's title)."""
+    """The layout: time series and events | Cp and the FRF of each level | C_l–α, and tabs with
+    the clusters of each level, the model summary and Table 1. ``levels``: the model's levels;
+    ``series``: the C_l–α series drawn so far with their colours (named in that view's title).
+
+    The time panel follows the newest data: live, the views show the latest samples, and a
+    finished recording opened as a file shows its end state with no clicks. The blueprint and
+    selection panels start collapsed so the views get the window."""
     levels = list(levels)
     frf_views: list[Any] = [
         rrb.BarChartView(
             origin=f"/frf/level_{slug(lv)}",
-            name=f"FRF level {lv}: |G| (blue), noise (gray), distortion (red) [dB] over f [Hz]",
+            name=f"FRF level {lv} [dB] over f [Hz]: |G| blue, noise gray, distortion red",
         )
         for lv in levels
     ] or [rrb.BarChartView(origin="/frf", name="FRF [dB] (after the first refit)")]
     cluster_views: list[Any] = [
         rrb.BarChartView(
             origin=f"/clusters/level_{slug(lv)}",
-            name=f"Clusters level {lv}: one bar per period, tallest the dominant cluster",
+            name=f"Clusters level {lv}: a bar per period, the dominant cluster tallest",
         )
         for lv in levels
     ] or [rrb.BarChartView(origin="/clusters", name="Clusters (after the first refit)")]
@@ -130,7 +134,8 @@ def make_blueprint(
                         x_range=sorted(cp_x.tolist()), y_range=sorted(cp_y.tolist())
                     ),
                 ),
-                rrb.Tabs(*frf_views),
+                *frf_views,
+                row_shares=[2] + [1] * len(frf_views),
             ),
             rrb.Vertical(
                 rrb.Spatial2DView(
@@ -141,11 +146,15 @@ def make_blueprint(
                     ),
                 ),
                 rrb.Tabs(
-                    *cluster_views,
+                    rrb.Vertical(*cluster_views, name="Clusters"),
                     rrb.TextDocumentView(origin="/model/summary", name="Model"),
                     rrb.TextDocumentView(origin="/model/table1", name="Table 1"),
+                    name="Identification",
                 ),
+                row_shares=[3, 2],
             ),
         ),
-        collapse_panels=False,
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline=TIMELINE, play_state="following"),
     )

@@ -36,18 +36,26 @@ class Rrd:
             rows.sort(key=lambda r: (r.get(TIMELINE) or 0, r["rerun.controls.RowId"]))
         # The views' names of each blueprint sent, in the order sent (a row id is a TUID: its
         # first 8 bytes are its time, big-endian), and of all of them.
-        sent: list[tuple[bytes, set[str]]] = []
+        # The time panel's settings of each (``TimePanelBlueprint:<field>`` -> value).
+        sent: list[tuple[bytes, set[str], dict[str, Any]]] = []
         for bp in reader.blueprints():
-            names: set[str] = set()
+            views: set[str] = set()
+            panel: dict[str, Any] = {}
             first = b"\xff" * 16
             for chunk in reader.stream(store=bp).to_chunks():
                 batch = chunk.to_record_batch()
                 first = min(first, *batch.column("rerun.controls.RowId").to_pylist())
                 if "ViewBlueprint:display_name" in batch.schema.names:
                     for value in batch.column("ViewBlueprint:display_name").to_pylist():
-                        names.update(value or [])
-            sent.append((first, names))
-        self.blueprints = [names for _, names in sorted(sent, key=lambda item: item[0])]
+                        views.update(value or [])
+                for name in batch.schema.names:
+                    if name.startswith("TimePanelBlueprint:"):
+                        (value,) = batch.column(name).to_pylist()[-1]
+                        panel[name.split(":", 1)[1]] = value
+            sent.append((first, views, panel))
+        sent.sort(key=lambda item: item[0])
+        self.blueprints = [views for _, views, _ in sent]
+        self.time_panels = [panel for _, _, panel in sent]
         self.view_names: set[str] = set().union(*self.blueprints)
 
     def column(self, entity: str, name: str) -> list[Any]:
