@@ -266,12 +266,16 @@ def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StorageP
     measured = np.array(rrd.column(f"{pred}/measured", "LineStrips2D:strips")[0][0])
     np.testing.assert_allclose(measured, [[5, -5], [6, -6], [7, -7], [8, -8]], atol=1e-5)
     assert len(rrd.column(f"{pred}/bla_ss_own_level", "LineStrips2D:strips")[0]) == 1  # 2 kept
-    # Each model in its colour, named in the C_l–α view's title; the new model in a spare one.
+    # Each model in its colour, named in the C_l–α view's legend; the new model in a spare one.
     for model, color in (*rig_view.PREDICTION_COLORS[:2], (NEW_MODEL, rig_view.SPARE_COLORS[0])):
         colors = rrd.column(f"{pred}/{rig_view.slug(model)}", "LineStrips2D:colors")
         assert colors[0] == [int.from_bytes(bytes([*color, 255]), "big")], model
-    (title,) = [v for v in rrd.blueprints[-1] if v.startswith("C_l–α")]
-    assert f"{mm.BLA_SS_OWN} (blue)" in title and f"{NEW_MODEL} (pink)" in title, title
+    (legend,) = rrd.static["/cl_alpha/legend"][-1:]
+    names = [mm.MEASURED, mm.BLA_SS_OWN, mm.PNLSS_ALL, NEW_MODEL, "live trail"]
+    assert legend["Points2D:labels"] == names
+    colors = [*dict(rig_view.PREDICTION_COLORS).values()]
+    expected = [colors[0], colors[1], colors[3], rig_view.SPARE_COLORS[0], (44, 160, 44)]
+    assert legend["Points2D:colors"] == [int.from_bytes(bytes([*c, 255]), "big") for c in expected]
     # Each gap is named once on the view's log, with its field, though both models carried the
     # 1 Hz one.
     warnings = [t[0] for t in rrd.column("/events/view", "TextLog:text")]
@@ -314,8 +318,9 @@ def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StorageP
     for head in ("Pitch [deg]", "FRF level 0 [dB]", "FRF level 2 [dB]", "Clusters level 0:"):
         assert any(v.startswith(head) for v in rrd.view_names), (head, rrd.view_names)
     # Opened with no clicks, every blueprint's time cursor follows the newest data (so a
-    # finished recording shows its end state; PlayState 3 is "following").
-    following = {"timeline": rig_view.TIMELINE, "play_state": 3}
+    # finished recording shows its end state; PlayState 3 is "following", PanelState 2
+    # "collapsed": the play bar without the streams tree).
+    following = {"timeline": rig_view.TIMELINE, "play_state": 3, "state": 2}
     assert rrd.time_panels and all(panel == following for panel in rrd.time_panels)
     # What the view received against the plan_end event's samples: nothing missed.
     (report,) = [w[0] for w in rrd.column("/events/view", "TextLog:text") if "plan" in w[0]]

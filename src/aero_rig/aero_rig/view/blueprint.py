@@ -28,6 +28,7 @@ ENTITY = {
     "cp_axes": "/cp/axes",
     "cl_alpha_live": "/cl_alpha/live",
     "cl_alpha_axes": "/cl_alpha/axes",
+    "cl_alpha_legend": "/cl_alpha/legend",
     "segment": "/events/segment",
     "model_event": "/events/model",
     "status": "/events/status",
@@ -49,12 +50,9 @@ PINK = (227, 119, 194)
 OLIVE = (188, 189, 34)
 CYAN = (23, 190, 207)
 CLUSTER_COLORS = [BLUE, ORANGE, GREEN, RED, PURPLE, BROWN, PINK]
-COLOR_NAMES = {
-    BLUE: "blue", ORANGE: "orange", GREEN: "green", RED: "red", GRAY: "gray", PURPLE: "purple",
-    BROWN: "brown", PINK: "pink", OLIVE: "olive", CYAN: "cyan",
-}  # fmt: skip
 # The C_l–α view's series (model_message.prediction_series): the measured loop and the models
-# of pipeline._validate_sine; a model added later takes the first spare colour.
+# of pipeline._validate_sine; a model added later takes the first spare colour. A legend (points
+# with the series' names) stands at the top left of the view, from LEGEND_AT down.
 PREDICTION_COLORS = (
     (mm.MEASURED, GRAY),
     (mm.BLA_SS_OWN, BLUE),
@@ -63,6 +61,8 @@ PREDICTION_COLORS = (
     (mm.PNLSS_LEVEL1, BROWN),
 )
 SPARE_COLORS = (PINK, OLIVE, CYAN, RED)
+LEGEND_AT = (-4.0, 2.1)  # (α [deg], C_l) of the first entry
+LEGEND_STEP = 0.13  # C_l between entries
 
 
 def slug(text: Any) -> str:
@@ -79,19 +79,13 @@ def cl_alpha_to_view(alpha_deg: np.ndarray, cl: np.ndarray) -> tuple[np.ndarray,
     return np.asarray(alpha_deg), -CL_SCALE * np.asarray(cl)
 
 
-def cl_alpha_title(series: Iterable[tuple[str, tuple[int, int, int]]]) -> str:
-    """The C_l–α view's title: each series drawn with its colour (the ones a model has sent)."""
-    drawn = [f"{name} ({COLOR_NAMES.get(color, 'rgb' + str(color))})" for name, color in series]
-    shown = ", ".join([*drawn, "live trail (green)"])
-    return f"C_l–α of the validation sines: {shown}"
+TABS = ("Clusters", "Model", "Table 1")  # the tabs under the C_l–α view
 
 
-def make_blueprint(
-    levels: Iterable[str] = (), series: Iterable[tuple[str, tuple[int, int, int]]] = ()
-) -> rrb.Blueprint:
+def make_blueprint(levels: Iterable[str] = (), active_tab: str = TABS[0]) -> rrb.Blueprint:
     """The layout: time series and events | Cp and the FRF of each level | C_l–α, and tabs with
     the clusters of each level, the model summary and Table 1. ``levels``: the model's levels;
-    ``series``: the C_l–α series drawn so far with their colours (named in that view's title).
+    ``active_tab``: the tab shown (one of TABS).
 
     The time panel follows the newest data: live, the views show the latest samples, and a
     finished recording opened as a file shows its end state with no clicks. The blueprint and
@@ -140,15 +134,17 @@ def make_blueprint(
             rrb.Vertical(
                 rrb.Spatial2DView(
                     origin="/cl_alpha",
-                    name=cl_alpha_title(series),
+                    name="C_l–α of the validation sines: each model against the measured loop "
+                    "(legend top left), live trail green",
                     visual_bounds=rrb.VisualBounds2D(
                         x_range=sorted(ca_x.tolist()), y_range=sorted(ca_y.tolist())
                     ),
                 ),
                 rrb.Tabs(
-                    rrb.Vertical(*cluster_views, name="Clusters"),
-                    rrb.TextDocumentView(origin="/model/summary", name="Model"),
-                    rrb.TextDocumentView(origin="/model/table1", name="Table 1"),
+                    rrb.Vertical(*cluster_views, name=TABS[0]),
+                    rrb.TextDocumentView(origin="/model/summary", name=TABS[1]),
+                    rrb.TextDocumentView(origin="/model/table1", name=TABS[2]),
+                    active_tab=TABS.index(active_tab),  # by name, rerun finds views only
                     name="Identification",
                 ),
                 row_shares=[3, 2],
@@ -156,5 +152,5 @@ def make_blueprint(
         ),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(timeline=TIMELINE, play_state="following"),
+        rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
     )

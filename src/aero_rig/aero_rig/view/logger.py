@@ -30,6 +30,8 @@ from .blueprint import (
     ENTITY,
     GRAY,
     GREEN,
+    LEGEND_AT,
+    LEGEND_STEP,
     ORANGE,
     PREDICTION_COLORS,
     RED,
@@ -164,7 +166,7 @@ class RigViewLogger:
         self._last_alpha: float | None = None
         self._trail: deque[tuple[int, float, float]] = deque()
         self._send_blueprint = send_blueprint
-        self._layout: tuple[list[str], list[str]] = ([], [])  # levels and series drawn
+        self._levels: list[str] = []
         self._series_colors: dict[str, tuple[int, int, int]] = {}  # by model, in order seen
         self._model_entities: set[str] = set()
         self._status_seen: dict[str, tuple[Any, ...]] = {}
@@ -425,11 +427,10 @@ class RigViewLogger:
         self._update_blueprint(sorted(str(k) for k in levels))
 
     def _update_blueprint(self, levels: list[str]) -> None:
-        """Send the layout again when the levels or the prediction series have changed."""
-        layout = (levels, list(self._series_colors))
-        if self._send_blueprint and layout != self._layout:
-            self.rec.send_blueprint(make_blueprint(levels, self._series_colors.items()))
-        self._layout = layout
+        """Send the layout again when the levels have changed (an FRF and a cluster view each)."""
+        if self._send_blueprint and levels != self._levels:
+            self.rec.send_blueprint(make_blueprint(levels))
+        self._levels = levels
 
     def _log_data_quality(self, quality: Any) -> str:
         """The data-quality line (also on ``/events/data_quality`` when it changes)."""
@@ -514,12 +515,33 @@ class RigViewLogger:
         return paths, text + f" ({n_periods} periods x {n_real} realizations)"
 
     def _series_color(self, model: str) -> tuple[int, int, int]:
-        """A model's colour: fixed for the known models, the next free one for a new model."""
+        """A model's colour: fixed for the known models, the next free one for a new model; a
+        new series redraws the legend."""
         if model not in self._series_colors:
             known = dict(PREDICTION_COLORS)
             spare = [c for c in SPARE_COLORS if c not in self._series_colors.values()]
             self._series_colors[model] = known.get(model) or (spare or SPARE_COLORS)[0]
+            self._log_legend()
         return self._series_colors[model]
+
+    def _log_legend(self) -> None:
+        """The C_l–α view's legend: one labelled point per series, from LEGEND_AT down, and the
+        live trail last (static: it holds at every time)."""
+        entries = [*self._series_colors.items(), ("live trail", GREEN)]
+        alpha = np.full(len(entries), LEGEND_AT[0])
+        cl = LEGEND_AT[1] - LEGEND_STEP * np.arange(len(entries))
+        x, y = cl_alpha_to_view(alpha, cl)
+        self.rec.log(
+            ENTITY["cl_alpha_legend"],
+            rr.Points2D(
+                np.column_stack([x, y]),
+                colors=[color for _, color in entries],
+                labels=[name for name, _ in entries],
+                show_labels=True,
+                radii=-5.0,
+            ),
+            static=True,
+        )
 
     def _log_predictions(self, model: dict[str, Any]) -> set[str]:
         """Every C_l series of every validation sine, one strip entity per model and sine."""
@@ -542,9 +564,12 @@ class RigViewLogger:
                 color = self._series_color(name)
                 radius = -2.0 if name == mm.MEASURED else -1.0
                 strips = finite_runs(x, y)
-                labels = [name] * len(strips)  # shown on hover: the legend of each strip
+                labels = [name] * len(strips)  # on hover (the legend names the colours)
                 self.rec.log(
-                    path, rr.LineStrips2D(strips, colors=color, radii=radius, labels=labels)
+                    path,
+                    rr.LineStrips2D(
+                        strips, colors=color, radii=radius, labels=labels, show_labels=False
+                    ),
                 )
                 paths.add(path)
         return paths
