@@ -61,7 +61,7 @@ PREDICTION_COLORS = (
     (mm.PNLSS_LEVEL1, BROWN),
 )
 SPARE_COLORS = (PINK, OLIVE, CYAN, RED)
-LEGEND_AT = (-4.0, 2.1)  # (α [deg], C_l) of the first entry
+LEGEND_AT = (6.5, 2.15)  # (α [deg], C_l) of the first entry: above the low-α loops
 LEGEND_STEP = 0.13  # C_l between entries
 
 
