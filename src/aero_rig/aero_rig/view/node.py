@@ -66,8 +66,8 @@ class View:
     """
 
     # The histories hold several times what the generator may publish at once (its
-    # max_lead_samples, 1000, when credit returns): with keep-last 1000 a busy view lost 249
-    # commands of the default campaign while keeping up on average (docs/results.md).
+    # max_lead_samples, 1000, when credit returns), so that a view busy drawing a model or a Cp
+    # frame takes the burst late instead of dropping its oldest samples.
     QOS: ClassVar[dict[str, tuple[str, int | None]]] = {
         PITCH_COMMAND.name: ("sensor", 5000),
         PITCH_STATE.name: ("sensor", 5000),
