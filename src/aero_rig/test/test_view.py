@@ -10,6 +10,7 @@ import math
 import os
 import re
 import signal
+from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
@@ -144,7 +145,7 @@ def messages() -> list[tuple[int, str, Any]]:
     for k, event in (
         (0, {"event": "start", "kind": "multisine", "level": 0, "realization": 1, "period": 2}),
         (N - 1, {"event": "end", "kind": "multisine", "level": 0, "realization": 1, "period": 2}),
-        (N - 1, {"event": "plan_end", "samples": N}),
+        (N - 1, {"event": "plan_end", "samples": N, "t0_ns": T0, "fs": FS}),
     ):
         edge = {"start": "start_stamp_s", "end": "end_stamp_s"}
         if event["event"] in edge:
@@ -420,6 +421,32 @@ def test_tap_samples_are_deserialized_only_when_logged(tmp_path: Path) -> None:
     rows = Rrd(tmp_path / "taps.rrd").rows["/cp/taps"]
     assert [r[rig_view.TIMELINE] for r in rows] == [stamp(0), stamp(10)]
     assert all(len(r["Points2D:positions"]) == 49 for r in rows)
+
+
+def test_view_reports_what_it_missed_inside_the_plan(tmp_path: Path) -> None:
+    """The report counts, per stream, the plan's samples the view never got: samples outside
+    the plan (the rig at rest before it) do not make up for lost ones."""
+    rec, _ = rig_view.open_recording("test_view", "save", tmp_path / "missed.rrd")
+    logger = rig_view.RigViewLogger(rec)
+    before = new_message("sensor_msgs/msg/JointState", name=[PITCH_JOINT], position=[0.0])
+    for k in range(-3, 0):  # three states before the plan's first sample
+        set_stamp(before.header.stamp, stamp(k))
+        logger.on_state(before)
+    lost = {(PITCH_COMMAND.name, 5), (PITCH_COMMAND.name, 6), (PITCH_STATE.name, 7)}
+    lost |= {(PRESSURE_TAPS.name, k) for k in range(30, 45)}  # it draws every 10th it gets
+    handlers = {topic: getattr(logger, handler) for topic, (_, handler) in rig_view.TOPICS.items()}
+    seen: dict[str, int] = defaultdict(int)
+    for _, topic, msg in messages():
+        k = seen[topic]
+        seen[topic] += 1
+        if (topic, k) in lost:
+            continue
+        handlers[topic](serialize(msg) if topic == PRESSURE_TAPS.name else msg)
+    assert logger.report() == (
+        f"view: of {N} plan samples missed 2 commands, 1 states, 0 C_l and 15 tap samples; "
+        f"drew {N // 10 - 1} of {N // 10} Cp frames (5.00 % missed)"
+    )
+    rig_view.close_recording(rec)
 
 
 def test_node_rejects_save_without_path_and_a_bad_mode(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -411,6 +411,7 @@ class Generator:
                 {
                     "event": "plan_end",
                     "samples": self.total,
+                    "fs": self.fs,
                     "planned_samples": self.planned_samples,
                     "revision": self.plan.revision,
                     "t0_ns": self.t0_ns,

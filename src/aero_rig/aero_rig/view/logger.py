@@ -2,7 +2,9 @@
 
 import json
 import math
+import struct
 import time
+from array import array
 from collections import OrderedDict, deque
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -44,6 +46,16 @@ from .blueprint import (
 )
 
 STATUS_LEVELS = {0: "INFO", 1: "WARN", 2: "ERROR", 3: "WARN"}
+STAMPED = ("command", "state", "coefficients", "taps", "taps_drawn")
+
+
+def cdr_stamp_ns(cdr: bytes | memoryview) -> int:
+    """The header stamp [ns] of a serialized stamped message, without deserializing it: after
+    the 4-byte encapsulation header (its second byte 1: little-endian) a std_msgs/Header begins
+    with its stamp, int32 sec and uint32 nanosec (OMG DDS-XTypes 1.3, §7.4.3 CDR)."""
+    order = "<" if cdr[1] & 1 else ">"
+    sec, nanosec = struct.unpack_from(order + "iI", cdr, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def _float_array(values: Any) -> np.ndarray:
@@ -160,7 +172,10 @@ class RigViewLogger:
             ("command", "state", "taps", "coefficients", "segment", "model", "status"), 0
         )
         self.counts.update(cl_invalid=0, taps_drawn=0, warnings=0)
-        self.plan_samples: int | None = None  # from the plan_end event
+        # The stamps received per stream (and of the Cp frames drawn), to count at the end what
+        # the view missed inside the plan: (t0_ns, samples, fs) from the plan_end event.
+        self._stamps = {key: array("q") for key in STAMPED}
+        self.plan: tuple[int, int, float] | None = None
         self.last_ns: int | None = None
         self._alpha_by_stamp: OrderedDict[int, float] = OrderedDict()
         self._last_alpha: float | None = None
@@ -248,6 +263,7 @@ class RigViewLogger:
     def on_command(self, msg: Any) -> None:
         n = self.counts["command"]
         self.counts["command"] += 1
+        self._stamps["command"].append(stamp_to_ns(msg.header.stamp))
         deg = self._pitch_deg(msg)
         if deg is None or n % self.series_decimation:
             return
@@ -260,6 +276,7 @@ class RigViewLogger:
         if deg is None:
             return
         t_ns = stamp_to_ns(msg.header.stamp)
+        self._stamps["state"].append(t_ns)
         self._alpha_by_stamp[t_ns] = deg
         while len(self._alpha_by_stamp) > 4096:
             self._alpha_by_stamp.popitem(last=False)
@@ -271,6 +288,7 @@ class RigViewLogger:
     def on_coefficients(self, msg: Any) -> None:
         n = self.counts["coefficients"]
         self.counts["coefficients"] += 1
+        self._stamps["coefficients"].append(stamp_to_ns(msg.header.stamp))
         cl = float(msg.vector.x)
         if not math.isfinite(cl):  # NaN = invalid sample (docs/design.md §8): a gap, not a value
             self.counts["cl_invalid"] += 1
@@ -303,6 +321,7 @@ class RigViewLogger:
             return
         xyz, pressures = read_cloud(msg)
         self.counts["taps_drawn"] += 1
+        self._stamps["taps_drawn"].append(stamp_to_ns(msg.header.stamp))
         x_c = xyz[:, 0] / self.chord_m
         cp = pressures / self.q_pa
         self._set_time(stamp_to_ns(msg.header.stamp))
@@ -323,6 +342,10 @@ class RigViewLogger:
     def on_taps_cdr(self, cdr: bytes | memoryview) -> None:
         """``on_taps`` of a serialized PointCloud2 (CDR, as on the wire and in a bag): only the
         samples it logs (every ``taps_decimation``-th) are deserialized, the others counted."""
+        try:
+            self._stamps["taps"].append(cdr_stamp_ns(cdr))
+        except struct.error:
+            pass  # too short for a header: deserialize names it below if it is drawn
         if self.counts["taps"] % self.taps_decimation:
             self.counts["taps"] += 1
             return
@@ -344,8 +367,10 @@ class RigViewLogger:
         if stamp_key and isinstance(event.get(stamp_key), int | float):
             t_ns = round(event[stamp_key] * 1e9)
         self._set_time(t_ns)
-        if edge == "plan_end" and isinstance(event.get("samples"), int):
-            self.plan_samples = event["samples"]
+        if edge == "plan_end":
+            plan = (event.get("t0_ns"), event.get("samples"), event.get("fs"))
+            if all(isinstance(v, int | float) for v in plan):
+                self.plan = (int(plan[0]), int(plan[1]), float(plan[2]))  # type: ignore[arg-type]
         level = "WARN" if edge in ("plan_aborted", "refused") else "INFO"
         entity = ENTITY["adaptive"] if edge in ("decision", "refused") else ENTITY["segment"]
         self.rec.log(entity, rr.TextLog(describe_segment(event), level=level))
@@ -585,25 +610,34 @@ class RigViewLogger:
         self.rec.log(ENTITY["view_event"], rr.TextLog(text, level="WARN"))
 
     def report(self) -> str:
-        """What the view received and drew against the plan's samples (known from the
-        ``plan_end`` event), also logged on ``/events/view``: the samples it missed and the
-        tap frames it should have drawn but did not."""
+        """What the view received and drew of the plan's samples (the ``plan_end`` event gives
+        the plan's first stamp, samples and rate), also logged on ``/events/view``: the samples
+        it missed per stream and the Cp frames it should have drawn but did not. Samples
+        outside the plan (the rig at rest before and after) are not counted."""
         c = self.counts
-        planned = self.plan_samples
-        if planned is None:
+        if self.plan is None:
             line = (
                 f"view: received {c['command']} commands, {c['state']} states, "
                 f"{c['coefficients']} C_l and {c['taps']} tap samples, drew {c['taps_drawn']} "
                 "Cp frames (the plan's end was not seen: nothing to compare with)"
             )
         else:
+            t0, planned, fs = self.plan
+            half = 0.5e9 / fs
+            first, last = t0 - half, t0 + (planned - 1) * 2 * half + half
+
+            def inside(key: str) -> int:
+                stamps = np.frombuffer(self._stamps[key], dtype=np.int64)
+                return int(np.unique(stamps[(stamps >= first) & (stamps <= last)]).size)
+
+            missed = {key: planned - inside(key) for key in STAMPED[:4]}
             frames = -(-planned // self.taps_decimation)
-            missed = {k: max(planned - c[k], 0) for k in ("command", "state", "coefficients")}
+            drawn = inside("taps_drawn")
             line = (
                 f"view: of {planned} plan samples missed {missed['command']} commands, "
                 f"{missed['state']} states, {missed['coefficients']} C_l and "
-                f"{max(planned - c['taps'], 0)} tap samples; drew {c['taps_drawn']} of {frames} "
-                f"Cp frames ({100.0 * max(frames - c['taps_drawn'], 0) / frames:.2f} % missed)"
+                f"{missed['taps']} tap samples; drew {drawn} of {frames} Cp frames "
+                f"({100.0 * max(frames - drawn, 0) / frames:.2f} % missed)"
             )
         self.rec.log(ENTITY["view_event"], rr.TextLog(line, level="INFO"))
         return line
