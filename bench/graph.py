@@ -259,7 +259,7 @@ VIEW_REPORT = re.compile(
 
 def view_figures(run_dir: Path) -> dict[str, Any]:
     """What the view missed (its report at shutdown, logs/view.log) and the .rrd's rows."""
-    from aero_rig.view.readback import Rrd
+    from aero_rig.view.readback import entity_rows
 
     reports = VIEW_REPORT.findall((run_dir / "logs" / "view.log").read_text(errors="replace"))
     if not reports:
@@ -276,7 +276,7 @@ def view_figures(run_dir: Path) -> dict[str, Any]:
             "cp_frames_planned": frames,
             "cp_frames_missed_percent": round(100.0 * (frames - drawn) / frames, 3),
         },
-        "rrd_rows": Rrd(run_dir / "campaign.rrd").counts(),
+        "rrd_rows": entity_rows(run_dir / "campaign.rrd"),
     }
 
 

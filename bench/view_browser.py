@@ -44,10 +44,10 @@ from typing import Any
 
 import numpy as np
 from PIL import Image
+from rerun.chunk import RrdReader
 
 from aero_rig.view import slug
 from aero_rig.view.blueprint import TABS, make_blueprint
-from aero_rig.view.readback import Rrd
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_FLAGS = (
@@ -179,9 +179,9 @@ def watch(browser: Any, url: str, png: Path, timeout_s: float, settle: int) -> d
 
 
 def recording_levels(rrd: Path) -> list[str]:
-    """The levels of a recording (its FRF entities), read back with Rerun's reader."""
-    rows = Rrd(rrd)
-    return sorted({p.split("/")[2].removeprefix("level_") for p in rows.rows
+    """The levels of a recording (its FRF entities), read with Rerun's reader (paths only)."""
+    paths = {str(chunk.entity_path) for chunk in RrdReader(rrd).stream().to_chunks()}
+    return sorted({p.split("/")[2].removeprefix("level_") for p in paths
                    if p.startswith("/frf/level_")})  # fmt: skip
 
 

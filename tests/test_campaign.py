@@ -221,13 +221,13 @@ def test_every_view_of_the_rrd_holds_what_the_identification_sent(campaign) -> N
     out holds data, and the model entities hold what models.json says, model by model."""
     from aero_identification import model_message as mm
     from aero_rig.view import slug
-    from aero_rig.view.readback import Rrd
+    from aero_rig.view.readback import Rrd, entity_rows
 
     run, proc = campaign
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     rrd = Rrd(run / "campaign.rrd")
     model = json.loads((run / "models.json").read_text())
-    rows = rrd.counts()
+    rows = entity_rows(run / "campaign.rrd")
     for entity in ("/series/pitch/command", "/series/pitch/measured", "/series/cl",
                    "/cp/upper", "/cp/lower", "/cp/taps", "/cl_alpha/live", "/events/segment",
                    "/events/model", "/events/status", "/model/summary"):  # fmt: skip
