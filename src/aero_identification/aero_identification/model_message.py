@@ -74,6 +74,19 @@ BLA_SS_LEVEL1: Final = "BLA SS (level 1)"
 PNLSS_ALL: Final = "PNLSS (all levels)"
 PNLSS_LEVEL1: Final = "PNLSS (level 1)"
 MODELS: Final = (BLA_SS_OWN, BLA_SS_LEVEL1, PNLSS_ALL, PNLSS_LEVEL1)
+# One colour per model (RGB), the same in the report's figures and in the view.
+MODEL_COLORS: Final = {
+    BLA_SS_OWN: (31, 119, 180),  # blue
+    BLA_SS_LEVEL1: (148, 103, 189),  # purple
+    PNLSS_ALL: (255, 127, 14),  # orange
+    PNLSS_LEVEL1: (140, 86, 75),  # brown
+}
+
+
+def model_color_hex(model: str) -> str | None:
+    """A model's colour as ``#rrggbb`` (None for a model without one)."""
+    rgb = MODEL_COLORS.get(model)
+    return None if rgb is None else "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
 def series_key(model: str) -> str:

@@ -165,7 +165,7 @@ def plot_time_series(
     ax = fig.subplots()
     ax.plot(t, y_measured, "k-", lw=1.2, label="measured")
     for name, y_sim in y_simulated.items():
-        ax.plot(t, y_sim, lw=1.0, label=name)
+        ax.plot(t, y_sim, lw=1.0, label=name, color=msg.model_color_hex(name))
     return _finish(fig, ax, path, "time [s]", ylabel, title)
 
 
@@ -191,7 +191,7 @@ def plot_cl_alpha(
         ax.plot(quasi_static[0], quasi_static[1], "-", color="0.6", lw=1, label="quasi-static")
     ax.plot(alpha_deg, cl_measured, "k-", lw=1.0, label="measured")
     for name, cl in (cl_simulated or {}).items():
-        ax.plot(alpha_deg, cl, lw=1.0, label=name)
+        ax.plot(alpha_deg, cl, lw=1.0, label=name, color=msg.model_color_hex(name))
     return _finish(fig, ax, path, "α [°]", "C_l", title)
 
 

@@ -53,13 +53,7 @@ CLUSTER_COLORS = [BLUE, ORANGE, GREEN, RED, PURPLE, BROWN, PINK]
 # The C_l–α view's series (model_message.prediction_series): the measured loop and the models
 # of pipeline._validate_sine; a model added later takes the first spare colour. A legend (points
 # with the series' names) stands at the top left of the view, from LEGEND_AT down.
-PREDICTION_COLORS = (
-    (mm.MEASURED, GRAY),
-    (mm.BLA_SS_OWN, BLUE),
-    (mm.BLA_SS_LEVEL1, PURPLE),
-    (mm.PNLSS_ALL, ORANGE),
-    (mm.PNLSS_LEVEL1, BROWN),
-)
+PREDICTION_COLORS = ((mm.MEASURED, GRAY), *mm.MODEL_COLORS.items())  # as the report's figures
 SPARE_COLORS = (PINK, OLIVE, CYAN, RED)
 LEGEND_AT = (6.5, 2.15)  # (α [deg], C_l) of the first entry: above the low-α loops
 LEGEND_STEP = 0.13  # C_l between entries
