@@ -1,6 +1,6 @@
 """A finished recording as a person sees it: Rerun's web viewer in headless Chromium, no clicks.
 
-    .venv/bin/python bench/view_browser.py RUN/campaign.rrd [--out DIR] [--timeout 120]
+    .venv/bin/python bench/view_browser.py RUN/campaign.rrd [--out DIR] [--timeout 120] [--no-tabs]
 
 Needs Debian's ``chromium`` package (``apt-get install chromium``); Playwright (in the venv,
 requirements-dev.txt) drives it and downloads no browser. Everything listens on 127.0.0.1, on
@@ -193,6 +193,8 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=Path("view_screenshots"), help="PNG directory")
     parser.add_argument("--timeout", type=float, default=120.0, help="longest watch per page [s]")
     parser.add_argument("--settle", type=int, default=4, help="unchanged screenshots that end it")
+    parser.add_argument("--tabs", action=argparse.BooleanOptionalAction, default=True,
+                        help="also one screenshot per tab")  # fmt: skip
     parser.add_argument("--chromium", default=CHROMIUM)
     args = parser.parse_args()
     if not Path(args.chromium).exists():
@@ -208,7 +210,7 @@ def main() -> int:
         served.mkdir()
         pages = {"opened": served / "opened.rrd"}
         os.symlink(args.rrd.resolve(), pages["opened"])
-        for tab in TABS:
+        for tab in TABS if args.tabs else ():
             copy = served / f"tab_{slug(tab)}.rrd"
             shutil.copyfile(args.rrd, copy)
             blueprint = Path(tmp) / f"{slug(tab)}.rbl"
