@@ -1,6 +1,6 @@
 """A finished recording as a person sees it: Rerun's web viewer in headless Chromium, no clicks.
 
-    .venv/bin/python bench/view_browser.py RUN/campaign.rrd [--out DIR] [--timeout 120] [--no-tabs]
+    .venv/bin/python bench/view_browser.py RUN/campaign.rrd [--out DIR] [--timeout 600] [--no-tabs]
 
 Needs Debian's ``chromium`` package (``apt-get install chromium``); Playwright (in the venv,
 requirements-dev.txt) drives it and downloads no browser. Everything listens on 127.0.0.1, on
@@ -15,7 +15,9 @@ file, ``http://VIEWER/?url=http://FILES/campaign.rrd``; the viewer may reach not
 2. ``tab_<name>.png``, one per tab under the C_l–α view (blueprint.TABS): a copy of the
    recording with one more blueprint appended, the recording's layout with that tab active
    (a recording shows the last blueprint it holds; its levels are read back from the recording
-   with Rerun's reader).
+   with Rerun's reader). The viewer applies that blueprint once it has read the whole file: a
+   large recording shows its own layout until then (the default campaign's, about 90 MB, took
+   about 4 minutes to load on two cores with software rendering).
 
 Chromium runs with ``--no-sandbox`` (root) and WebGL on its software renderer (SwiftShader);
 the viewer falls back from WebGPU to WebGL by itself, ``renderer=webgl`` asks for it directly.
@@ -191,7 +193,7 @@ def main() -> int:
         "rrd", type=Path, help="a finished recording (aero-rig campaign --rerun save)"
     )
     parser.add_argument("--out", type=Path, default=Path("view_screenshots"), help="PNG directory")
-    parser.add_argument("--timeout", type=float, default=120.0, help="longest watch per page [s]")
+    parser.add_argument("--timeout", type=float, default=600.0, help="longest watch per page [s]")
     parser.add_argument("--settle", type=int, default=4, help="unchanged screenshots that end it")
     parser.add_argument("--tabs", action=argparse.BooleanOptionalAction, default=True,
                         help="also one screenshot per tab")  # fmt: skip
