@@ -26,11 +26,14 @@ from rig_runtime.testing import graph_env
 
 ROS2 = Path(sys.executable).parent / "ros2"
 NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]
-pytestmark = pytest.mark.skipif(
-    not ROS2.exists(),
-    reason="the ros2 tools are not in the venv (make test installs them from "
-    "../shared/ros2-python; absent here)",
-)
+pytestmark = [
+    pytest.mark.ci_required,
+    pytest.mark.skipif(
+        not ROS2.exists(),
+        reason="the ros2 tools are not in the venv (make test installs them from "
+        "../shared/ros2-python; absent here)",
+    ),
+]
 
 
 class RunningGraph:

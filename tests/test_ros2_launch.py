@@ -39,7 +39,10 @@ def _launch_ready() -> str | None:
     return None
 
 
-pytestmark = pytest.mark.skipif(_launch_ready() is not None, reason=str(_launch_ready()))
+pytestmark = [
+    pytest.mark.ci_required,
+    pytest.mark.skipif(_launch_ready() is not None, reason=str(_launch_ready())),
+]
 
 
 @pytest.fixture(scope="module")
