@@ -82,14 +82,16 @@ def test_a_writer_leaving_at_once_still_delivers_to_a_paused_reader(tmp_path: Pa
 def test_latched_topic_reaches_late_subscriber(tmp_path: Path) -> None:
     result = tmp_path / "late.json"
     with Processes(graph_env(), log_dir=tmp_path) as procs:
-        procs.start_entry(
+        talker = procs.start_entry(
             "rig_runtime",
             "talker",
             *_talker_args(count=1, qos="latched", wait_for_subscribers=0, linger_s=30.0),
         )
-        import time
-
-        time.sleep(2.0)  # the sample is published long before the subscriber exists
+        # The sample is published before the subscriber exists: a late join, nothing else.
+        assert wait_for(lambda: "published 1 messages" in procs.log("talker"), 30), procs.log(
+            "talker"
+        )
+        assert talker.poll() is None, procs.log("talker")  # still there to serve the late join
         listener = procs.start_entry(
             "rig_runtime", "listener", *_listener_args(result, count=1, qos="latched")
         )

@@ -110,7 +110,9 @@ def test_sigterm_mid_run_leaves_finalised_bag(tmp_path: Path) -> None:
     with Processes(graph_env(), log_dir=tmp_path) as procs:
         recorder, _ = _start(procs, bag, 10_000_000)
         assert wait_for(lambda: (bag / "metadata.yaml").exists(), 30)
-        time.sleep(2.0)
+        # Mid-run: the recorder has written a chunk of the stream (MCAP writes whole chunks).
+        mcap = bag / "bag_0.mcap"
+        assert wait_for(lambda: mcap.exists() and mcap.stat().st_size > 200_000, 60)
         os.kill(recorder.pid, signal.SIGTERM)
         assert wait_for(lambda: recorder.poll() is not None, 20)
         assert recorder.returncode == 0, procs.log("recorder")
