@@ -262,8 +262,8 @@ def view_figures(run_dir: Path) -> dict[str, Any]:
     from aero_rig.view.readback import entity_rows
 
     reports = VIEW_REPORT.findall((run_dir / "logs" / "view.log").read_text(errors="replace"))
-    if not reports:
-        raise RuntimeError(f"{run_dir / 'logs' / 'view.log'}: no report of the view")
+    if not reports:  # e.g. --before a checkout whose view did not report
+        return {"view": None, "rrd_rows": entity_rows(run_dir / "campaign.rrd")}
     planned, command, state, cl, taps, drawn, frames = map(int, reports[-1])
     return {
         "view": {

@@ -16,8 +16,7 @@ file, ``http://VIEWER/?url=http://FILES/campaign.rrd``; the viewer may reach not
    recording with one more blueprint appended, the recording's layout with that tab active
    (a recording shows the last blueprint it holds; its levels are read back from the recording
    with Rerun's reader). The viewer applies that blueprint once it has read the whole file: a
-   large recording shows its own layout until then (the default campaign's, about 90 MB, took
-   about 4 minutes to load on two cores with software rendering).
+   large recording shows its own layout until then (docs/results.md gives the load times).
 
 Chromium runs with ``--no-sandbox`` (root) and WebGL on its software renderer (SwiftShader);
 the viewer falls back from WebGPU to WebGL by itself, ``renderer=webgl`` asks for it directly.
@@ -46,10 +45,10 @@ from typing import Any
 
 import numpy as np
 from PIL import Image
-from rerun.chunk import RrdReader
 
 from aero_rig.view import slug
 from aero_rig.view.blueprint import TABS, make_blueprint
+from aero_rig.view.readback import entity_rows
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_FLAGS = (
@@ -182,8 +181,7 @@ def watch(browser: Any, url: str, png: Path, timeout_s: float, settle: int) -> d
 
 def recording_levels(rrd: Path) -> list[str]:
     """The levels of a recording (its FRF entities), read with Rerun's reader (paths only)."""
-    paths = {str(chunk.entity_path) for chunk in RrdReader(rrd).stream().to_chunks()}
-    return sorted({p.split("/")[2].removeprefix("level_") for p in paths
+    return sorted({p.split("/")[2].removeprefix("level_") for p in entity_rows(rrd)
                    if p.startswith("/frf/level_")})  # fmt: skip
 
 

@@ -3,7 +3,6 @@ identification; the small plan (conftest.small_plan) where a run must lose nothi
 the idle run's tables under load or after the identifier's kill."""
 
 import json
-import math
 import os
 import re
 import shutil
@@ -221,6 +220,8 @@ def test_every_view_of_the_rrd_holds_what_the_identification_sent(campaign) -> N
     out holds data, and the model entities hold what models.json says, model by model."""
     from aero_identification import model_message as mm
     from aero_rig.view import slug
+    from aero_rig.view.blueprint import cl_alpha_to_view
+    from aero_rig.view.logger import finite_runs
     from aero_rig.view.readback import Rrd, entity_rows
 
     run, proc = campaign
@@ -237,12 +238,17 @@ def test_every_view_of_the_rrd_holds_what_the_identification_sent(campaign) -> N
     for pred in model[mm.PREDICTIONS]:
         series = dict(mm.prediction_series(pred))
         assert set(series) == {mm.MEASURED, *mm.MODELS}, series.keys()
+        alpha = np.array(pred[mm.ALPHA_DEG], float)
         for name, values in series.items():
             entity = f"/cl_alpha/predictions/{slug(pred[mm.NAME])}/{slug(name)}"
             strips = rrd.column(entity, "LineStrips2D:strips")
             assert strips, entity
-            drawn = sum(len(strip) for strip in strips[-1])
-            assert drawn == sum(math.isfinite(v) for v in values) > 0, entity
+            # The last drawing is this series, point by point, in view coordinates.
+            expected = finite_runs(*cl_alpha_to_view(alpha, np.array(values, float)))
+            lines = [np.array(strip) for strip in strips[-1]]
+            assert len(lines) == len(expected) > 0, entity
+            for got, want in zip(lines, expected, strict=True):
+                np.testing.assert_allclose(got, want, atol=1e-4, err_msg=entity)
     # The FRF with its noise and distortion, and the cluster labels, of each level.
     for label, level in model[mm.LEVELS].items():
         for part in ("G_dB", "noise_dB", "nl_distortion_dB"):

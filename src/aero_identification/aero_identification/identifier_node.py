@@ -56,7 +56,7 @@ from rig_runtime.interface import (
     joint_position,
 )
 
-from . import adaptive, refit_worker
+from . import adaptive, model_message, refit_worker
 from .campaign import CampaignAssembler
 from .campaign_dataset import equal_periods
 from .config import config_from_parameters, config_parameters
@@ -488,7 +488,7 @@ class Identifier:
         self.refit_times.append(elapsed)
         self.last_summary = summary
         refit_worker.release_memory()  # the pickled job and its answer
-        payload["refit"] = self.refits
+        payload[model_message.REFIT] = self.refits
         payload["refit_s"] = elapsed
         payload["reason"] = self.future_reason
         self.model_pub.publish(

@@ -1,10 +1,12 @@
 """The fields of the ``/identification/model`` message (and ``models.json``): one contract between
-the identification that writes them (results.py, pipeline.py) and the view that draws them.
+the identification that writes them (results.py, pipeline.py, the identifier node) and the view
+and report that read them.
 
 The message is JSON. What the view reads, by where it sits:
 
-- top level: ``refit`` (set by the identifier node), ``levels`` by label, ``predictions``,
-  ``table1``, ``data_quality``, ``warnings``, ``experiment`` (``decisions`` of adaptive runs);
+- top level: ``refit`` (the identifier node's count), ``stamp_ns`` (optional: the model's
+  experiment time; without it the view uses the latest stamp it has seen), ``levels`` by label,
+  ``predictions``, ``table1`` and ``data_quality``;
 - ``levels[label]``: ``offset_deg``, ``bla`` (the FRF with its variances) and ``clusters``;
 - ``predictions[i]``: one validation sine, ``alpha_deg`` and ``cl_measured`` and one series per
   model, keyed ``cl_<model name>`` (`series_key`), all of the same length.
@@ -18,6 +20,7 @@ from typing import Any, Final
 
 # -- top level -----------------------------------------------------------------------------------
 REFIT: Final = "refit"
+STAMP_NS: Final = "stamp_ns"
 LEVELS: Final = "levels"
 PREDICTIONS: Final = "predictions"
 TABLE1: Final = "table1"
@@ -119,66 +122,85 @@ def _numbers(values: Any) -> list[float] | None:
     return out
 
 
-def problems(model: Mapping[str, Any]) -> list[str]:
-    """What a reader of the model message cannot use, one line each naming the field: a missing
-    field, a series whose length differs from its abscissa's, or a non-finite prediction
-    (a diverged simulation). Empty when the message is whole. Missing variances or clusters
-    are not problems: an early refit has none."""
-    out = [f"{name}: missing" for name in (LEVELS, PREDICTIONS, TABLE1) if name not in model]
+def problems(model: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """What a reader of the model message cannot use, as (field, what is wrong): a missing field,
+    values that are not numbers, a series whose length differs from its abscissa's, or a
+    non-finite prediction (a diverged simulation). Empty when the message is whole. Missing
+    variances or clusters are not problems: an early refit has none."""
+    out = [(name, "missing") for name in (LEVELS, PREDICTIONS, TABLE1) if name not in model]
     levels = model.get(LEVELS)
     if LEVELS in model and not isinstance(levels, Mapping):
-        out.append(f"{LEVELS}: not an object")
+        out.append((LEVELS, "not an object"))
         levels = {}
     for label, level in (levels or {}).items():
-        where = f"{LEVELS}.{label}"
-        if not isinstance(level, Mapping):
-            out.append(f"{where}: not an object")
-            continue
-        bla = level.get(BLA)
-        if bla is not None:
-            freq = _numbers(bla.get(FREQ_HZ)) if isinstance(bla, Mapping) else None
-            if freq is None:
-                out.append(f"{where}.{BLA}.{FREQ_HZ}: missing or not numbers")
-            else:
-                for name in FRF_FIELDS[1:]:
-                    values = _numbers(bla.get(name))
-                    if name in (G_RE, G_IM) and values is None:
-                        out.append(f"{where}.{BLA}.{name}: missing or not numbers")
-                    elif values is not None and len(values) != len(freq):
-                        out.append(
-                            f"{where}.{BLA}.{name}: {len(values)} values for "
-                            f"{len(freq)} frequencies"
-                        )
-        clusters = level.get(CLUSTERS)
-        if clusters is not None:
-            labels = clusters.get(LABELS) if isinstance(clusters, Mapping) else None
-            rows = labels if isinstance(labels, list) else []
-            if not rows or len({len(r) if isinstance(r, list) else -1 for r in rows}) != 1:
-                out.append(f"{where}.{CLUSTERS}.{LABELS}: not a periods x realizations table")
+        out += _level_problems(f"{LEVELS}.{label}", level)
     predictions = model.get(PREDICTIONS)
     if PREDICTIONS in model and not isinstance(predictions, list):
-        out.append(f"{PREDICTIONS}: not a list")
+        out.append((PREDICTIONS, "not a list"))
         predictions = []
     for i, pred in enumerate(predictions or []):
-        if not isinstance(pred, Mapping):
-            out.append(f"{PREDICTIONS}[{i}]: not an object")
-            continue
-        where = f"{PREDICTIONS}[{pred.get(NAME, i)!s}]"
-        alpha = _numbers(pred.get(ALPHA_DEG))
-        if alpha is None:
-            out.append(f"{where}.{ALPHA_DEG}: missing or not numbers")
-            continue
-        for model_name, raw in prediction_series(pred):
-            values = _numbers(raw)
-            field = f"{where}.{series_key(model_name)}"
-            if values is None:
-                out.append(f"{field}: not numbers")
-            elif len(values) != len(alpha):
-                out.append(f"{field}: {len(values)} values for {len(alpha)} angles")
-            elif not all(math.isfinite(v) for v in values):
-                bad = sum(not math.isfinite(v) for v in values)
-                out.append(f"{field}: {bad} of {len(values)} values not finite")
-    table = model.get(TABLE1)
-    if TABLE1 in model and not isinstance(table, Mapping):
-        out.append(f"{TABLE1}: not an object")
+        out += _prediction_problems(i, pred)
+    if TABLE1 in model and not isinstance(model.get(TABLE1), Mapping):
+        out.append((TABLE1, "not an object"))
+    quality = model.get(DATA_QUALITY)
+    if quality is not None and not (
+        isinstance(quality, Mapping) and isinstance(quality.get("samples", {}), Mapping)
+    ):
+        out.append((DATA_QUALITY, "not an account of samples"))
+    return out
+
+
+def _level_problems(where: str, level: Any) -> list[tuple[str, str]]:
+    if not isinstance(level, Mapping):
+        return [(where, "not an object")]
+    out = []
+    offset = level.get(OFFSET_DEG)
+    if offset is not None and not isinstance(offset, int | float):
+        out.append((f"{where}.{OFFSET_DEG}", "not a number"))
+    bla = level.get(BLA)
+    if bla is not None:
+        freq = _numbers(bla.get(FREQ_HZ)) if isinstance(bla, Mapping) else None
+        if freq is None:
+            out.append((f"{where}.{BLA}.{FREQ_HZ}", "missing or not numbers"))
+        else:
+            for name in FRF_FIELDS[1:]:
+                raw = bla.get(name)
+                values = _numbers(raw)
+                if values is None and (name in (G_RE, G_IM) or raw is not None):
+                    out.append((f"{where}.{BLA}.{name}", "missing or not numbers"))
+                elif values is not None and len(values) != len(freq):
+                    out.append(
+                        (
+                            f"{where}.{BLA}.{name}",
+                            f"{len(values)} values for {len(freq)} frequencies",
+                        )
+                    )
+    clusters = level.get(CLUSTERS)
+    if clusters is not None:
+        labels = clusters.get(LABELS) if isinstance(clusters, Mapping) else None
+        rows = labels if isinstance(labels, list) else []
+        table = all(isinstance(r, list) and r and all(isinstance(v, int) for v in r) for r in rows)
+        if not rows or not table or len({len(r) for r in rows}) != 1:
+            out.append((f"{where}.{CLUSTERS}.{LABELS}", "not a periods x realizations table"))
+    return out
+
+
+def _prediction_problems(i: int, pred: Any) -> list[tuple[str, str]]:
+    if not isinstance(pred, Mapping):
+        return [(f"{PREDICTIONS}[{i}]", "not an object")]
+    where = f"{PREDICTIONS}[{pred.get(NAME, i)!s}]"
+    alpha = _numbers(pred.get(ALPHA_DEG))
+    if alpha is None:
+        return [(f"{where}.{ALPHA_DEG}", "missing or not numbers")]
+    out = []
+    for model_name, raw in prediction_series(pred):
+        values = _numbers(raw)
+        field = f"{where}.{series_key(model_name)}"
+        if values is None:
+            out.append((field, "not numbers"))
+        elif len(values) != len(alpha):
+            out.append((field, f"{len(values)} values for {len(alpha)} angles"))
+        elif not all(math.isfinite(v) for v in values):
+            bad = sum(not math.isfinite(v) for v in values)
+            out.append((field, f"{bad} of {len(values)} values not finite"))
     return out

@@ -29,8 +29,8 @@ def needs_f16(test: Any) -> Any:
     """Runs where the F-16 data are; skipped elsewhere, except in CI (conftest.py)."""
     skip = pytest.mark.skipif(
         not F16_DIR or not Path(F16_DIR).is_dir(),
-        reason=f"F-16 GVT data not found in {SHARED_F16}: set F16_GVT_DIR to the directory of "
-        "the benchmark CSVs (F16Data_FullMSine_Level*.csv)",
+        reason=f"F-16 GVT data not found in {F16_DIR or SHARED_F16}: set F16_GVT_DIR to the "
+        "directory of the benchmark CSVs (F16Data_FullMSine_Level*.csv)",
     )
     return pytest.mark.ci_required(skip(test))
 

@@ -343,6 +343,8 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
     del broken["stamp_ns"]  # at the time of the models before it
     broken["levels"]["0"]["bla"]["G_im"] = [0.0]  # 1 value for 4 frequencies
     broken["predictions"][0][mm.series_key(mm.PNLSS_ALL)] = [0.5, 0.6]  # 2 values for 4 angles
+    broken["levels"]["3"] = {"offset_deg": "high", "bla": [1, 2], "clusters": "k = 2"}
+    broken["data_quality"] = {"samples": ["pitch"]}
     for _ in range(2):
         logger.on_model(new_message(string, data=json.dumps(broken)))
     for bad in ("not json", "[1, 2]"):
@@ -362,10 +364,15 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
         f"{model}: predictions: missing",
         f"{model}: table1: missing",
         f"{model}: levels.0.bla.G_im: 1 values for 4 frequencies",
+        f"{model}: levels.3.offset_deg: not a number",
+        f"{model}: levels.3.bla.freq_hz: missing or not numbers",
+        f"{model}: levels.3.clusters.labels: not a periods x realizations table",
         f"{model}: predictions[sine level 0 1.0 Hz].{mm.series_key(mm.BLA_SS_OWN)}: "
         "1 of 4 values not finite",
         f"{model}: predictions[sine level 0 1.0 Hz].{mm.series_key(mm.PNLSS_ALL)}: "
         "2 values for 4 angles",
+        f"{model}: data_quality: not an account of samples",
+        f"{model}: levels.3: not drawn ('list' object has no attribute 'get')",
     ]
     assert "/frf/level_0/G_dB" not in rrd.rows and "/frf/level_2/G_dB" in rrd.rows
     assert "/cl_alpha/predictions/sine_level_0_1_0_hz/pnlss_all_levels" not in rrd.rows

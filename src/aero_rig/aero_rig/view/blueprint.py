@@ -53,7 +53,7 @@ CLUSTER_COLORS = [BLUE, ORANGE, GREEN, RED, PURPLE, BROWN, PINK]
 # The C_l–α view's series (model_message.prediction_series): the measured loop and the models
 # of pipeline._validate_sine; a model added later takes the first spare colour. A legend (points
 # with the series' names) stands at the top left of the view, from LEGEND_AT down.
-PREDICTION_COLORS = ((mm.MEASURED, GRAY), *mm.MODEL_COLORS.items())  # as the report's figures
+PREDICTION_COLORS = ((mm.MEASURED, GRAY), *mm.MODEL_COLORS.items())  # the models' as the report's
 SPARE_COLORS = (PINK, OLIVE, CYAN, RED)
 LEGEND_AT = (6.5, 2.15)  # (α [deg], C_l) of the first entry: above the low-α loops
 LEGEND_STEP = 0.13  # C_l between entries
@@ -117,7 +117,7 @@ def make_blueprint(levels: Iterable[str] = (), active_tab: str = TABS[0]) -> rrb
             rrb.Vertical(
                 rrb.Spatial2DView(
                     origin="/cp",
-                    name="−Cp over x/c, every 10th sample (upper blue, lower orange)",
+                    name="−Cp over x/c, decimated (upper blue, lower orange)",
                     visual_bounds=rrb.VisualBounds2D(
                         x_range=sorted(cp_x.tolist()), y_range=sorted(cp_y.tolist())
                     ),

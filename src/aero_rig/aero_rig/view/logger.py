@@ -47,6 +47,7 @@ from .blueprint import (
 
 STATUS_LEVELS = {0: "INFO", 1: "WARN", 2: "ERROR", 3: "WARN"}
 STAMPED = ("command", "state", "coefficients", "taps", "taps_drawn")
+MAX_WARNED = 100  # subjects the view names on /events/view; more are only counted
 
 
 def cdr_stamp_ns(cdr: bytes | memoryview) -> int:
@@ -272,11 +273,11 @@ class RigViewLogger:
     def on_state(self, msg: Any) -> None:
         n = self.counts["state"]
         self.counts["state"] += 1
+        t_ns = stamp_to_ns(msg.header.stamp)
+        self._stamps["state"].append(t_ns)
         deg = self._pitch_deg(msg)
         if deg is None:
             return
-        t_ns = stamp_to_ns(msg.header.stamp)
-        self._stamps["state"].append(t_ns)
         self._alpha_by_stamp[t_ns] = deg
         while len(self._alpha_by_stamp) > 4096:
             self._alpha_by_stamp.popitem(last=False)
@@ -368,9 +369,14 @@ class RigViewLogger:
             t_ns = round(event[stamp_key] * 1e9)
         self._set_time(t_ns)
         if edge == "plan_end":
-            plan = (event.get("t0_ns"), event.get("samples"), event.get("fs"))
-            if all(isinstance(v, int | float) for v in plan):
-                self.plan = (int(plan[0]), int(plan[1]), float(plan[2]))  # type: ignore[arg-type]
+            t0, samples, fs = event.get("t0_ns"), event.get("samples"), event.get("fs")
+            if (
+                isinstance(t0, int | float)
+                and isinstance(samples, int | float)
+                and isinstance(fs, int | float)
+                and samples > 0 < fs
+            ):
+                self.plan = (int(t0), int(samples), float(fs))
         level = "WARN" if edge in ("plan_aborted", "refused") else "INFO"
         entity = ENTITY["adaptive"] if edge in ("decision", "refused") else ENTITY["segment"]
         self.rec.log(entity, rr.TextLog(describe_segment(event), level=level))
@@ -398,10 +404,11 @@ class RigViewLogger:
         and left out; the rest is drawn."""
         self.counts["model"] += 1
         model = json_object(msg.data, IDENTIFICATION_MODEL.name)
-        stamp = model.get("stamp_ns")
+        stamp = model.get(mm.STAMP_NS)
         self._set_time(int(stamp) if isinstance(stamp, int | float) else None)
-        for problem in mm.problems(model):
-            self.warn(f"{IDENTIFICATION_MODEL.name}: {problem}")
+        topic = IDENTIFICATION_MODEL.name
+        for field, problem in mm.problems(model):
+            self.warn(f"{topic}: {field}", problem)
         levels = model.get(mm.LEVELS)
         if not isinstance(levels, dict):
             levels = {}
@@ -412,12 +419,16 @@ class RigViewLogger:
         for name, level in sorted(levels.items()):
             if not isinstance(level, dict):
                 continue
-            frf_paths |= self._log_frf(name, level.get(mm.BLA) or {})
-            paths, text = self._log_clusters(name, level.get(mm.CLUSTERS) or {})
+            try:  # a level that cannot be drawn is named, the others are drawn
+                frf_paths |= self._log_frf(name, level.get(mm.BLA) or {})
+                paths, text = self._log_clusters(name, level.get(mm.CLUSTERS) or {})
+            except (ValueError, TypeError, AttributeError) as exc:
+                self.warn(f"{topic}: {mm.LEVELS}.{name}", f"not drawn ({exc})")
+                continue
             cluster_paths |= paths
             offset = level.get(mm.OFFSET_DEG)
-            head = f"- level {name}" + (f" (offset {offset:g}°)" if offset is not None else "")
-            summary.append(head + (f": {text}" if text else ""))
+            where = f" (offset {offset:g}°)" if isinstance(offset, int | float) else ""
+            summary.append(f"- level {name}{where}" + (f": {text}" if text else ""))
         self._clear_missing("/frf/", frf_paths)
         self._clear_missing("/clusters/", cluster_paths)
         self._clear_missing("/cl_alpha/predictions/", self._log_predictions(model))
@@ -459,14 +470,18 @@ class RigViewLogger:
 
     def _log_data_quality(self, quality: Any) -> str:
         """The data-quality line (also on ``/events/data_quality`` when it changes)."""
-        if not isinstance(quality, dict):
+        samples = quality.get("samples") if isinstance(quality, dict) else None
+        if not isinstance(quality, dict) or not isinstance(samples, dict):
             return "data quality: not reported"
         counts = ", ".join(
             f"{name} {c.get('received', '?')} of {c.get('expected', '?')}"
-            for name, c in (quality.get("samples") or {}).items()
+            for name, c in samples.items()
             if isinstance(c, dict)
         )
-        problems = data_quality_lines(quality) if quality.get("clean") is False else []
+        try:
+            problems = data_quality_lines(quality) if quality.get("clean") is False else []
+        except (KeyError, TypeError, AttributeError) as exc:
+            problems = [f"the account cannot be read ({exc!r})"]
         line = "data quality: " + ("not clean: " + "; ".join(problems) if problems else "clean")
         line += f" (plan samples received: {counts})" if counts else ""
         if line != self._quality_line:
@@ -550,9 +565,12 @@ class RigViewLogger:
         return self._series_colors[model]
 
     def _log_legend(self) -> None:
-        """The C_l–α view's legend: one labelled point per series, from LEGEND_AT down, and the
-        live trail last (static: it holds at every time)."""
-        entries = [*self._series_colors.items(), ("live trail", GREEN)]
+        """The C_l–α view's legend: one labelled point per series, the known ones in their order
+        (PREDICTION_COLORS), then the others as seen, the live trail last, from LEGEND_AT down
+        (static: it holds at every time)."""
+        known = [name for name, _ in PREDICTION_COLORS]
+        order = sorted(self._series_colors, key=lambda n: known.index(n) if n in known else 99)
+        entries = [(n, self._series_colors[n]) for n in order] + [("live trail", GREEN)]
         alpha = np.full(len(entries), LEGEND_AT[0])
         cl = LEGEND_AT[1] - LEGEND_STEP * np.arange(len(entries))
         x, y = cl_alpha_to_view(alpha, cl)
@@ -575,7 +593,10 @@ class RigViewLogger:
         for i, pred in enumerate(predictions if isinstance(predictions, list) else []):
             if not isinstance(pred, dict):
                 continue
-            alpha = _float_array(pred.get(mm.ALPHA_DEG))
+            try:
+                alpha = _float_array(pred.get(mm.ALPHA_DEG))
+            except (TypeError, ValueError):
+                continue  # named by model_message.problems
             base = f"/cl_alpha/predictions/{slug(pred.get(mm.NAME, f'prediction {i}'))}"
             for name, values in mm.prediction_series(pred):
                 try:
@@ -599,15 +620,15 @@ class RigViewLogger:
                 paths.add(path)
         return paths
 
-    def warn(self, text: str) -> None:
-        """A warning on the view's ``/events/view`` log, once per subject (the text up to its
-        first ': ', e.g. the topic and field)."""
-        subject = text.rsplit(": ", 1)[0]
+    def warn(self, subject: str, detail: str) -> None:
+        """A warning on the view's ``/events/view`` log (``subject: detail``), once per subject
+        (a topic, or a topic and a field), for at most MAX_WARNED subjects; every warning is
+        counted (``counts["warnings"]``)."""
         self.counts["warnings"] += 1
-        if subject in self._warned:
+        if subject in self._warned or len(self._warned) >= MAX_WARNED:
             return
         self._warned.add(subject)
-        self.rec.log(ENTITY["view_event"], rr.TextLog(text, level="WARN"))
+        self.rec.log(ENTITY["view_event"], rr.TextLog(f"{subject}: {detail}", level="WARN"))
 
     def report(self) -> str:
         """What the view received and drew of the plan's samples (the ``plan_end`` event gives
@@ -619,7 +640,8 @@ class RigViewLogger:
             line = (
                 f"view: received {c['command']} commands, {c['state']} states, "
                 f"{c['coefficients']} C_l and {c['taps']} tap samples, drew {c['taps_drawn']} "
-                "Cp frames (the plan's end was not seen: nothing to compare with)"
+                "Cp frames (no plan_end event with t0_ns, samples and fs: nothing to compare "
+                "with)"
             )
         else:
             t0, planned, fs = self.plan

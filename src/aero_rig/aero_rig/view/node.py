@@ -124,7 +124,7 @@ class View:
                 handler(msg)
             except (ValueError, KeyError, TypeError) as exc:
                 self.errors += 1
-                self.logger.warn(f"{topic}: {exc}")
+                self.logger.warn(topic, str(exc).removeprefix(f"{topic}: "))
                 if self.errors <= 20 or self.errors % 1000 == 0:
                     self.node.logger.warning("%s: %s (%d bad messages)", topic, exc, self.errors)
 
@@ -135,10 +135,12 @@ class View:
         self.node.logger.info("received %s errors=%d", counts, self.errors)
 
     def close(self) -> None:
-        self.log_stats()
-        self.node.logger.info("%s", self.logger.report())
-        self.logger.send_series()
-        close_recording(self.rec)
+        try:
+            self.log_stats()
+            self.node.logger.info("%s", self.logger.report())
+        finally:
+            self.logger.send_series()
+            close_recording(self.rec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

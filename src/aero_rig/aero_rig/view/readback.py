@@ -34,6 +34,8 @@ class Rrd:
                 target[chunk.entity_path].append({n: columns[n][i] for n in names})
         for rows in self.rows.values():
             rows.sort(key=lambda r: (r.get(TIMELINE) or 0, r["rerun.controls.RowId"]))
+        # Plain dicts from here: looking an entity up must not add it.
+        self.rows, self.static = dict(self.rows), dict(self.static)
         # The views' names of each blueprint sent, in the order sent (a row id is a TUID: its
         # first 8 bytes are its time, big-endian), and of all of them.
         # The time panel's settings of each (``TimePanelBlueprint:<field>`` -> value).
@@ -59,15 +61,15 @@ class Rrd:
         self.view_names: set[str] = set().union(*self.blueprints)
 
     def column(self, entity: str, name: str) -> list[Any]:
-        return [row[name] for row in self.rows[entity] if row.get(name) is not None]
+        return [row[name] for row in self.rows.get(entity, []) if row.get(name) is not None]
 
     def scalars(self, entity: str) -> tuple[np.ndarray, np.ndarray]:
-        rows = [r for r in self.rows[entity] if r.get("Scalars:scalars") is not None]
+        rows = [r for r in self.rows.get(entity, []) if r.get("Scalars:scalars") is not None]
         times = np.array([r[TIMELINE] for r in rows], dtype=np.int64)
         return times, np.array([r["Scalars:scalars"][0] for r in rows])
 
     def bars(self, entity: str, row: int = -1) -> tuple[np.ndarray, np.ndarray]:
-        rows = [r for r in self.rows[entity] if r.get("BarChart:values") is not None]
+        rows = [r for r in self.rows.get(entity, []) if r.get("BarChart:values") is not None]
         r = rows[row]
         return (
             np.array(r["BarChart:abscissa"][0]["buffer"]),

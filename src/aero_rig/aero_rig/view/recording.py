@@ -144,7 +144,8 @@ def view_bag(
                     else:
                         handlers[conn.id](reader.deserialize(raw, conn.msgtype))
                 except ValueError as exc:
-                    view.warn(f"{conn.topic}: {exc}")
+                    known = _route(conn.topic) or conn.topic  # the handlers' errors name it
+                    view.warn(conn.topic, str(exc).removeprefix(f"{known}: "))
         view.report()
         view.send_series()
     finally:
