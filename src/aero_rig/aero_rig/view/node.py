@@ -96,14 +96,17 @@ class View:
             trail_s=p["trail_s"],
         )
         self.errors = 0
+        self.subscriptions: list[Any] = []
         for topic, (type_name, handler) in TOPICS.items():
             qos, depth = self.QOS[topic]
             call = getattr(self.logger, handler)
             raw = takes_cdr(handler)  # a raw subscription: (CDR bytes, receive time)
             if raw:
                 call = self._serialized(call)
-            node.create_subscription(
-                type_name, topic, self._guard(topic, call), qos, depth=depth, raw=raw
+            self.subscriptions.append(
+                node.create_subscription(
+                    type_name, topic, self._guard(topic, call), qos, depth=depth, raw=raw
+                )
             )
         # The series go to Rerun in batches (RigViewLogger): this bounds how long a sample waits.
         node.create_timer(p["series_flush_s"], self.logger.send_series)
@@ -131,8 +134,17 @@ class View:
         return call
 
     def log_stats(self) -> None:
+        """Counts of what arrived, and how many of the view's readers have matched a writer (a
+        best-effort reader drops what a writer sends before the reader has matched it)."""
         counts = " ".join(f"{k}={v}" for k, v in self.logger.counts.items())
-        self.node.logger.info("received %s errors=%d", counts, self.errors)
+        matched = sum(s.publisher_count() > 0 for s in self.subscriptions)
+        self.node.logger.info(
+            "received %s errors=%d matched=%d/%d",
+            counts,
+            self.errors,
+            matched,
+            len(self.subscriptions),
+        )
 
     def close(self) -> None:
         try:
