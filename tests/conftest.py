@@ -4,12 +4,15 @@ are marked ``slow``. ``make test-fast`` (``pytest -m "not slow"``) leaves them o
 test`` runs them.
 """
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 from graph_support import small_plan_design
 
 from multisine_gen.plan_format import plan_to_json
+from rig_runtime.testing import graph_env
 
 HERE = Path(__file__).resolve().parent
 
@@ -26,3 +29,24 @@ def small_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("plan") / "small.json"
     path.write_text(plan_to_json(small_plan_design()))
     return path
+
+
+@pytest.fixture(scope="session")
+def small_campaign(
+    small_plan: Path, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, subprocess.CompletedProcess[str]]:
+    """The small plan (one level, 69 s of experiment) on the release-0.1 wing
+    (test_campaign.WING), one machine, idle: the reference of the runs that must lose nothing
+    and give the same tables under load, after a fault or on two hosts."""
+    run = tmp_path_factory.mktemp("small") / "run"
+    cli = [sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", str(small_plan)]
+    cli += ["-p", "sim_wing.preset:=repeatable_stall", "--out", str(run), "--quiet"]
+    proc = subprocess.run(
+        [*cli, "--timeout", "600"],
+        env=graph_env(),
+        capture_output=True,
+        text=True,
+        timeout=700,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return run, proc

@@ -1,17 +1,27 @@
-"""Shared pieces of the graph tests: an in-process observer node that collects topics."""
+"""Shared pieces of the graph tests: an in-process observer node that collects topics, the
+small plan, campaigns with nodes paused in turn, and the graph on two hosts."""
 
+import json
+import os
+import signal
+import subprocess
 import sys
+import time
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rosbags.highlevel import AnyReader
 
+from aero_rig.verdict import STREAM_TOPICS
 from multisine_gen.campaigns import build_plan
 from multisine_gen.plan import ExperimentPlan
 from rig_runtime.barrier import ReadinessReport
-from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY
+from rig_runtime.graph import package_share
+from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY, PITCH_COMMAND
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import CdrSubscription, Node
 from rig_runtime.testing import finish, node_process, pause, start_session, wait_for
@@ -173,3 +183,127 @@ def campaign_paused_in_turn(
     finally:
         out, err = finish(proc, 600)
     return proc.returncode, out, err, paused
+
+
+# -- the graph on two hosts (rig_runtime.netlab) ------------------------------------------------
+RIG, WORKSTATION, TOOLS = "rig", "workstation", "tools"
+LAB_HOSTS = [RIG, WORKSTATION, TOOLS]  # TOOLS: a third machine for the ros2 command
+
+
+def lab_env(lab: Any, host: str, base: dict[str, str], static_peers: bool) -> dict[str, str]:
+    """The environment of ``host``'s processes: ROS's default discovery range (SUBNET,
+    multicast), or ``static_peers``: LOCALHOST with the other hosts in ROS_STATIC_PEERS, as
+    ROS 2 documents for reaching named machines. Asynchronous publication, as the one-host
+    campaign at full speed."""
+    env = {**base, "RMW_FASTRTPS_PUBLICATION_MODE": "ASYNCHRONOUS"}
+    env.pop("ROS_STATIC_PEERS", None)
+    if static_peers:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        env["ROS_STATIC_PEERS"] = ";".join(lab.address(h) for h in lab.hosts if h != host)
+    else:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
+    return env
+
+
+@dataclass
+class TwoHostRun:
+    """A campaign split over the lab's rig and workstation hosts, as it ended."""
+
+    code: int  # the campaign's exit code
+    out: str
+    err: str
+    rig_code: int  # rig-launch's, stopped by SIGINT once the campaign ended
+    rig_log: str
+    wall_s: float  # the campaign's, start to exit
+    started: float  # epoch seconds of the campaign's start
+    fault_at: float | None = None  # epoch seconds of the fault
+
+    @staticmethod
+    def summary_of(run: Path) -> dict[str, Any]:
+        """The run's campaign.json."""
+        return json.loads((run / "campaign.json").read_text())
+
+
+def two_host_campaign(
+    lab: Any,
+    plan: Path,
+    run: Path,
+    base_env: dict[str, str],
+    *,
+    static_peers: bool = False,
+    rig_overrides: Sequence[str] = ("sim_wing.preset:=repeatable_stall",),
+    during: Callable[["subprocess.Popen[str]"], None] | None = None,
+    timeout_s: float = 600.0,
+) -> TwoHostRun:
+    """The simulated graph of config/sim.yaml on two hosts: ``rig-launch --host rig`` on the
+    lab's rig (generator, actuator, wing, lift) and ``aero-rig campaign --host workstation``
+    on its workstation (identifier, recorder), as a lab runs it on two machines. ``during``
+    (given the campaign's process) runs once the identifier holds the first realization."""
+    sim = str(package_share("aero_rig") / "config" / "sim.yaml")
+    sets = [f"generator.plan:={plan}", "generator.real_time_factor:=0.0", *rig_overrides]
+    rig_cmd = [sys.executable, "-m", "rig_runtime.launcher", sim, "--host", RIG]
+    rig_cmd += [arg for s in sets for arg in ("-p", s)]
+    cli = [sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", str(plan)]
+    cli += ["--host", WORKSTATION, "--out", str(run), "--quiet", "--timeout", str(timeout_s)]
+    rig = start_session(lab.command(RIG, rig_cmd), lab_env(lab, RIG, base_env, static_peers))
+    fault_at = None
+    try:
+        started = time.time()
+        proc = start_session(
+            lab.command(WORKSTATION, cli), lab_env(lab, WORKSTATION, base_env, static_peers)
+        )
+        try:
+            if during is not None:
+                log = run / "logs" / "identifier.log"
+                held = wait_for(
+                    lambda: (
+                        (log.exists() and "realization 0 complete" in log.read_text())
+                        or proc.poll() is not None
+                    ),
+                    timeout_s,
+                )
+                assert held and proc.poll() is None, "the campaign ended before the fault"
+                fault_at = time.time()
+                during(proc)
+        finally:
+            out, err = finish(proc, timeout_s + 120)
+        wall = time.time() - started
+    finally:
+        if rig.poll() is None:
+            os.killpg(rig.pid, signal.SIGINT)
+        rig_out, rig_err = finish(rig, 60)
+    return TwoHostRun(
+        proc.returncode, out, err, rig.returncode, rig_out + rig_err, wall, started, fault_at
+    )
+
+
+# What a run that lost its stream logs (the first wave's failure under load: the actuator ran on
+# in real time and its time went backwards); every anomaly is logged as "anomaly: ...".
+CORRUPTION_SIGNS = ("running on in real time", "time went backwards", "anomaly:")
+
+
+def stream_stamps(bag: Path) -> dict[str, list[int]]:
+    stamps: dict[str, list[int]] = {}
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic in STREAM_TOPICS]
+        for conn, _, raw in reader.messages(connections=conns):
+            msg: Any = reader.deserialize(raw, conn.msgtype)
+            stamps.setdefault(conn.topic, []).append(stamp_to_ns(msg.header.stamp))
+    return stamps
+
+
+def assert_lossless_and_identical(run: Path, reference: Path) -> None:
+    models = json.loads((run / "models.json").read_text())
+    assert models["data_quality"]["clean"], models["data_quality"]
+    stamps = stream_stamps(run / "bag")
+    commands = set(stamps[PITCH_COMMAND.name])
+    assert len(commands) == len(stamps[PITCH_COMMAND.name]) > 0
+    for topic in STREAM_TOPICS:
+        missing = commands - set(stamps[topic])
+        assert not missing, f"{topic}: {len(missing)} plan samples missing from the bag"
+    for log in (run / "logs").glob("*.log"):
+        text = log.read_text()
+        for sign in CORRUPTION_SIGNS:
+            assert sign not in text, f"{log.name}: {sign!r}"
+    for name in ("table1_all_levels.md", "table1_level1.md"):
+        assert (run / name).read_bytes() == (reference / name).read_bytes(), name

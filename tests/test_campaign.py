@@ -15,10 +15,12 @@ from typing import Any
 
 import numpy as np
 import pytest
-from graph_support import campaign_paused_in_turn
+from graph_support import (
+    assert_lossless_and_identical,
+    campaign_paused_in_turn,
+)
 from rosbags.highlevel import AnyReader
 
-from aero_rig.verdict import STREAM_TOPICS
 from rig_runtime.interface import (
     EXPERIMENT_CONTROL,
     EXPERIMENT_PLAN,
@@ -87,29 +89,6 @@ def campaign(
     return run, proc
 
 
-# What a run that lost its stream logs (the first wave's failure under load: the actuator ran on
-# in real time and its time went backwards); every anomaly is logged as "anomaly: ...".
-CORRUPTION_SIGNS = ("running on in real time", "time went backwards", "anomaly:")
-
-
-@pytest.fixture(scope="module")
-def small_campaign(
-    small_plan: Path, tmp_path_factory: pytest.TempPathFactory
-) -> tuple[Path, subprocess.CompletedProcess[str]]:
-    """The small plan (conftest.small_plan: one level, 69 s of experiment) on the same wing,
-    idle: the reference of the runs below that must lose nothing and give the same tables
-    under load or after a fault (a third of the short campaign's time)."""
-    run = tmp_path_factory.mktemp("small") / "run"
-    proc = _aero_rig(
-        *("campaign", "--plan", str(small_plan), *WING, "--out", str(run), "--quiet"),
-        *TIMEOUT_600,
-        env=graph_env(),
-        timeout=700,
-    )
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    return run, proc
-
-
 @pytest.fixture(scope="module")
 def starved_campaign(
     small_plan: Path, tmp_path_factory: pytest.TempPathFactory
@@ -125,33 +104,6 @@ def starved_campaign(
             timeout=900,
         )
     return run, proc
-
-
-def _stream_stamps(bag: Path) -> dict[str, list[int]]:
-    stamps: dict[str, list[int]] = {}
-    with AnyReader([bag]) as reader:
-        conns = [c for c in reader.connections if c.topic in STREAM_TOPICS]
-        for conn, _, raw in reader.messages(connections=conns):
-            msg: Any = reader.deserialize(raw, conn.msgtype)
-            stamps.setdefault(conn.topic, []).append(stamp_to_ns(msg.header.stamp))
-    return stamps
-
-
-def _assert_lossless_and_identical(run: Path, reference: Path) -> None:
-    models = json.loads((run / "models.json").read_text())
-    assert models["data_quality"]["clean"], models["data_quality"]
-    stamps = _stream_stamps(run / "bag")
-    commands = set(stamps[PITCH_COMMAND.name])
-    assert len(commands) == len(stamps[PITCH_COMMAND.name]) > 0
-    for topic in STREAM_TOPICS:
-        missing = commands - set(stamps[topic])
-        assert not missing, f"{topic}: {len(missing)} plan samples missing from the bag"
-    for log in (run / "logs").glob("*.log"):
-        text = log.read_text()
-        for sign in CORRUPTION_SIGNS:
-            assert sign not in text, f"{log.name}: {sign!r}"
-    for name in ("table1_all_levels.md", "table1_level1.md"):
-        assert (run / name).read_bytes() == (reference / name).read_bytes(), name
 
 
 def _tables(text: str) -> dict[tuple[str, str], float]:
@@ -344,7 +296,7 @@ def test_starved_campaign_is_lossless_and_gives_the_same_table(
     run, proc = starved_campaign
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "data clean" in proc.stdout
-    _assert_lossless_and_identical(run, small_campaign[0])
+    assert_lossless_and_identical(run, small_campaign[0])
 
 
 @pytest.mark.timeout(900)
@@ -359,7 +311,7 @@ def test_nodes_paused_in_turn_lose_nothing(
     code, out, err, paused = campaign_paused_in_turn(args, run, graph_env())
     assert len(paused) >= 4, f"the run ended before most pauses: {paused}"
     assert code == 0, out[-3000:] + err[-3000:]
-    _assert_lossless_and_identical(run, small_campaign[0])
+    assert_lossless_and_identical(run, small_campaign[0])
 
 
 def _campaign_with_fault(

@@ -17,6 +17,7 @@ pyyaml and the standard library, so a ``ros2 launch`` process can use it::
         stops_graph: false            # true: when it exits (even with 0), the graph stops
         nice: 0                       # lower the CPU priority by 0..19, as `nice -n`
         barrier: member               # start barrier (barrier.py): lead | member | none
+        host: rig                     # optional: the machine it runs on (see below)
 
 The start barrier: the ``lead`` node (the generator) starts the experiment only when every
 ``member`` node (the default) has reported ready and matched on /graph/ready; the lead gets
@@ -24,8 +25,16 @@ their names as its ``barrier_nodes`` parameter. ``none``: a process that does no
 (not written on rig_runtime) and is not waited for.
 
 A node that exits non-zero always stops the graph.
+
+Hosts: a lab runs one graph on several machines (the hardware nodes on the rig PC, the
+identification on a workstation). ``host`` names the machine a node runs on; ``rig-launch
+--host NAME`` and ``aero-rig campaign --host NAME`` start only that machine's nodes, and the
+start barrier still waits for every member, wherever it runs. A graph launched for named
+hosts must place every node on one.
 """
 
+import re
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -34,6 +43,7 @@ from typing import Any
 import yaml
 
 BARRIER_ROLES = ("lead", "member", "none")
+_HOST_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 
 
 class GraphError(ValueError):
@@ -52,6 +62,11 @@ class NodeSpec:
     stops_graph: bool = False
     nice: int = 0
     barrier: str = "member"
+    host: str = ""  # the machine it runs on ("": not placed; only a whole-graph launch runs it)
+
+    def on(self, hosts: Collection[str] | None) -> bool:
+        """Whether a launcher started for ``hosts`` (None: every host) starts this node."""
+        return hosts is None or self.host in hosts
 
     @property
     def fq_name(self) -> str:
@@ -88,6 +103,25 @@ class GraphSpec:
         """``{lead: {"barrier_nodes": [member FQNs]}}``: what the start barrier waits for."""
         members = [n.fq_name for n in self.nodes if n.barrier == "member"]
         return {n.name: {"barrier_nodes": members} for n in self.nodes if n.barrier == "lead"}
+
+    @property
+    def hosts(self) -> tuple[str, ...]:
+        """The named hosts, in the order their first node is listed."""
+        return tuple(dict.fromkeys(n.host for n in self.nodes if n.host))
+
+    def check_hosts(self, hosts: Collection[str]) -> None:
+        """GraphError unless every name in ``hosts`` is a host of this graph and every node is
+        placed on a host (a node on no host would run on none, or on each)."""
+        unknown = sorted(set(hosts) - set(self.hosts))
+        if unknown:
+            known = ", ".join(self.hosts) or "none"
+            raise GraphError(f"graph {self.name!r} has no host {unknown[0]!r} (its hosts: {known})")
+        unplaced = [n.name for n in self.nodes if not n.host]
+        if unplaced:
+            raise GraphError(
+                f"graph {self.name!r} places no host for {', '.join(unplaced)}: give each node "
+                "a 'host' to launch it by hosts"
+            )
 
     def node(self, name: str) -> NodeSpec:
         for n in self.nodes:
@@ -175,6 +209,7 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
             "stops_graph",
             "nice",
             "barrier",
+            "host",
         }
         if unknown:
             raise GraphError(f"{where}: unknown keys {sorted(unknown)}")
@@ -192,6 +227,11 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
             raise GraphError(
                 f"{where} ({item['name']}): 'barrier' must be one of {', '.join(BARRIER_ROLES)}"
             )
+        host = item.get("host", "")
+        if not isinstance(host, str) or (host and not _HOST_NAME.fullmatch(host)):
+            raise GraphError(
+                f"{where} ({item['name']}): 'host' must be a name of letters, digits, '_' or '-'"
+            )
         params = tuple(resolve_path(str(p), base) for p in item.get("parameters") or [])
         for p in params:
             if not p.exists():
@@ -208,6 +248,7 @@ def parse_graph(document: Any, base: Path | None = None, source: Path | None = N
                 stops_graph=bool(item.get("stops_graph", False)),
                 nice=nice,
                 barrier=barrier,
+                host=host,
             )
         )
     leads = [n.name for n in nodes if n.barrier == "lead"]

@@ -1,6 +1,6 @@
 """Graph launcher: every node of a graph description as its own OS process.
 
-``rig-launch GRAPH.yaml [--duration S] [-p node.param:=value ...]``
+``rig-launch GRAPH.yaml [--host NAME ...] [--duration S] [-p node.param:=value ...]``
 
 - SIGINT/SIGTERM are forwarded to every node (SIGINT first, as ros2 launch does; SIGTERM
   after ``--grace`` seconds; SIGKILL after twice that) and every child is reaped.
@@ -11,6 +11,8 @@
   campaign), else to the launcher's stderr with a ``[node]`` prefix on every line, as
   ``ros2 launch`` shows it. A node with ``stops_graph: true`` stops the graph when it exits.
 - ``--duration S`` stops the graph after S seconds (exit 0 if every node stopped cleanly).
+- ``--host NAME`` (repeatable) starts only the nodes the graph places on that machine
+  (graph.py, ``host``); the other machines start theirs, and the start barrier waits for all.
 - A node whose process is stopped (SIGSTOP, Ctrl-Z on its group, a debugger) is named once it
   has been stopped for longer than the DDS participant lease, past which its peers drop it
   with what they had not delivered; and again when it runs on (docs/design.md §3.10).
@@ -25,7 +27,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -115,8 +117,13 @@ class Launcher:
         overrides: Mapping[str, dict[str, Any]] | None = None,
         log_dir: Path | None = None,
         grace_s: float = 5.0,
+        hosts: Collection[str] | None = None,
     ) -> None:
         self.graph = graph
+        # The machines whose nodes this launcher starts (None: every node of the graph).
+        if hosts is not None:
+            graph.check_hosts(hosts)
+        self.hosts = None if hosts is None else frozenset(hosts)
         # RIG_LAUNCHER_PID: a node whose parent is no longer this process stops (Node.spin), so
         # a launcher killed with SIGKILL leaves no graph running on.
         self.env = {**os.environ, **(env or {}), LAUNCHER_PID_ENV: str(os.getpid())}
@@ -135,8 +142,18 @@ class Launcher:
         self.stopped_since: dict[str, float] = {}  # node: monotonic time it was seen stopped
         self._logs: list[Any] = []
 
+    @property
+    def local_nodes(self) -> tuple[NodeSpec, ...]:
+        """The nodes this launcher starts."""
+        return tuple(n for n in self.graph.nodes if n.on(self.hosts))
+
+    @property
+    def remote_nodes(self) -> tuple[NodeSpec, ...]:
+        """The graph's nodes that other machines start."""
+        return tuple(n for n in self.graph.nodes if not n.on(self.hosts))
+
     def start(self) -> None:
-        for spec in self.graph.nodes:
+        for spec in self.local_nodes:
             cmd = node_command(spec, self.overrides.get(spec.name))
             stdout: Any = subprocess.PIPE
             log_path = None
@@ -314,6 +331,14 @@ def main(argv: list[str] | None = None) -> int:
         "-p", dest="overrides", action="append", default=[], help="NODE.PARAM:=VALUE override"
     )
     parser.add_argument("--grace", type=float, default=5.0, help="seconds per stop stage")
+    parser.add_argument(
+        "--host",
+        dest="hosts",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="start only the nodes the graph places on host NAME (repeatable; default: all)",
+    )
     args = parser.parse_args(argv)
     try:
         require_rclpy()
@@ -322,12 +347,21 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         graph = load_graph(args.graph)
-        launcher = Launcher(graph, overrides=parse_overrides(args.overrides), grace_s=args.grace)
-        for spec in graph.nodes:
+        launcher = Launcher(
+            graph, overrides=parse_overrides(args.overrides), grace_s=args.grace, hosts=args.hosts
+        )
+        for spec in launcher.local_nodes:
             entry_point(spec.package, spec.executable)  # fail before starting anything
     except GraphError as exc:
         _log(f"error: {exc}")
         return 2
+    if launcher.hosts is not None:
+        here = ", ".join(n.name for n in launcher.local_nodes) or "no node"
+        elsewhere = ", ".join(n.name for n in launcher.remote_nodes) or "none"
+        _log(
+            f"host {', '.join(sorted(launcher.hosts))}: starting {here}; the other hosts start "
+            f"{elsewhere} (the start barrier waits for them)"
+        )
     return launcher.run(args.duration)
 
 

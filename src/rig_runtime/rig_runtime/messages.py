@@ -8,6 +8,7 @@ dataclasses for headers), CDR bytes come from its ``serialize_cdr``.
 
 import dataclasses
 import functools
+import struct
 from collections.abc import Callable
 from typing import Any
 
@@ -242,3 +243,20 @@ def stamp_to_ns(stamp: Any) -> int:
 def set_stamp(stamp: Any, t_ns: int) -> None:
     """Write integer nanoseconds into a ``builtin_interfaces/Time`` in place."""
     stamp.sec, stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
+
+
+@functools.cache
+def starts_with_header(type_name: str) -> bool:
+    """Whether a message type's first field is a std_msgs/Header (its CDR begins with the
+    stamp: :func:`cdr_stamp_ns`)."""
+    fields = typestore().fielddefs[normalize_type_name(type_name)][1]
+    return bool(fields) and fields[0][1] == (Nodetype.NAME, "std_msgs/msg/Header")
+
+
+def cdr_stamp_ns(cdr: bytes | memoryview) -> int:
+    """The header stamp [ns] of a serialized stamped message, without deserializing it: after
+    the 4-byte encapsulation header (its second byte 1: little-endian) a std_msgs/Header begins
+    with its stamp, int32 sec and uint32 nanosec (OMG DDS-XTypes 1.3, §7.4.3 CDR)."""
+    order = "<" if cdr[1] & 1 else ">"
+    sec, nanosec = struct.unpack_from(order + "iI", cdr, 4)
+    return sec * 1_000_000_000 + nanosec

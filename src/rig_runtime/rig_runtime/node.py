@@ -41,8 +41,17 @@ from typing import Any, overload
 from . import ros_environment
 from .anomaly import Anomaly, AnomalyLog
 from .barrier import Endpoint, ReadinessReport
-from .interface import EXPERIMENT_ANOMALY, GRAPH_READY
-from .messages import deserialize, new_message, normalize_type_name, serialize
+from .diagnostics import OK, diagnostic_array
+from .flow import FLOW_PERIOD_S, FLOW_STATUS_SUFFIX, flow_values
+from .interface import DIAGNOSTICS, EXPERIMENT_ANOMALY, GRAPH_READY
+from .messages import (
+    cdr_stamp_ns,
+    deserialize,
+    new_message,
+    normalize_type_name,
+    serialize,
+    starts_with_header,
+)
 from .params import Parameter, ParameterError, ParameterSet, assign, default_parameters
 from .qos import QosProfile, resolve_qos, to_rclpy_qos
 from .ros_environment import LAUNCHER_PID_ENV, ArgumentError
@@ -93,6 +102,24 @@ class CdrEndpoint:
     topic: str
     type_name: str
     profile: QosProfile
+    # Its flow (flow.py): messages passed and, for a stream of stamped messages, the last stamp.
+    count: int = 0
+    stamp_ns: int = 0
+
+    @property
+    def streams(self) -> bool:
+        """A reliable keep-all endpoint of stamped messages: its flow is reported."""
+        return (
+            self.profile.keep_all
+            and self.profile.reliability == "reliable"
+            and starts_with_header(self.type_name)
+        )
+
+    def passed(self, data: bytes) -> None:
+        """Count a message (its CDR bytes) through this endpoint."""
+        self.count += 1
+        if self.streams:
+            self.stamp_ns = cdr_stamp_ns(data)
 
 
 class CdrPublisher(CdrEndpoint):
@@ -104,6 +131,7 @@ class CdrPublisher(CdrEndpoint):
     def publish_raw(self, data: bytes) -> None:
         try:
             self.handle.publish(bytes(data))
+            self.passed(data)
         except Exception as exc:  # rclpy's RCLError: say which writer and why it gave up
             raise RuntimeError(
                 f"publishing on {self.topic} failed: a reader has not acknowledged for "
@@ -284,6 +312,7 @@ class Node(rclpy.node.Node):
         self._last_report = ""
         self._last_signature: object = None
         self._anomalies: AnomalyLog | None = None
+        self._flow_pub: CdrPublisher | None = None
         # Pauses past the participant lease (start_pause_watch): how long this process did not run.
         self.paused_s: list[float] = []
         self._on_paused: list[Callable[[float], None]] = []
@@ -453,6 +482,7 @@ class Node(rclpy.node.Node):
 
         def deliver(data: bytes) -> None:
             self._delivered += 1
+            subscription.passed(data)
             if raw:
                 callback((data, time.time_ns()))
             else:
@@ -562,6 +592,27 @@ class Node(rclpy.node.Node):
         if text != self._last_report:
             self._last_report = text
             self._ready_pub.publish(self.new_message(GRAPH_READY.type, data=text))
+
+    # -- the flow of the streams (flow.py) -------------------------------------------------
+    def start_flow_report(self, period_s: float = FLOW_PERIOD_S) -> None:
+        """Report on /diagnostics, every ``period_s``, what each stream reader has received and
+        each stream writer has sent (flow.py); run_node starts it for every graph node. It is
+        also the node's heartbeat: a host whose nodes all fall silent is cut off."""
+        if self._flow_pub is not None:
+            return
+        self._flow_pub = self.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name, DIAGNOSTICS.qos)
+        self.create_timer(period_s, self._report_flow)
+
+    def _report_flow(self) -> None:
+        assert self._flow_pub is not None
+        endpoints = [("writer", p) for p in self._cdr_publishers] + [
+            ("reader", s) for s in self._cdr_subscriptions
+        ]
+        values = flow_values(
+            (kind, e.topic, e.count, e.stamp_ns) for kind, e in endpoints if e.streams
+        )
+        name = self.fq_name + FLOW_STATUS_SUFFIX
+        self._flow_pub.publish(diagnostic_array(self, name, OK, "", self.fq_name, values))
 
     # -- pauses past the participant lease (docs/design.md §3.10) --------------------------
     def start_pause_watch(self) -> None:
@@ -809,6 +860,7 @@ def run_node(
         close = getattr(instance, "close", None)
         if callable(close):
             node.on_shutdown(close)
+        node.start_flow_report()
         node.start_readiness()
         node.start_pause_watch()
         node.logger.info("running on %s", node.middleware_description)

@@ -226,3 +226,56 @@ def test_a_stopped_node_is_named_past_the_lease_and_still_stops_cleanly(
     # resumed by the stop, it handled SIGINT itself
     assert codes["listener"] == 0, (codes, capsys.readouterr().err)
     assert result.exists()  # and wrote its summary on the way out
+
+
+def _placed(tmp_path: Path, hosts: dict[str, str]) -> Path:
+    """The talker/listener graph with ``{node: host}`` placed (a barrier lead on the talker)."""
+    document = yaml.safe_load(_graph(tmp_path, 0, tmp_path / "listener.json").read_text())
+    for node in document["nodes"]:
+        if node["name"] in hosts:
+            node["host"] = hosts[node["name"]]
+    document["nodes"][1]["barrier"] = "lead"
+    path = tmp_path / "placed.yaml"
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+def test_a_launch_by_host_starts_that_hosts_nodes_and_waits_for_all(tmp_path: Path) -> None:
+    from rig_runtime.graph import GraphError
+    from rig_runtime.launcher import Launcher
+
+    graph = load_graph(_placed(tmp_path, {"listener": "workstation", "talker": "rig"}))
+    assert graph.hosts == ("workstation", "rig")
+    rig = Launcher(graph, hosts=["rig"])
+    assert [n.name for n in rig.local_nodes] == ["talker"]
+    assert [n.name for n in rig.remote_nodes] == ["listener"]
+    # the start barrier's lead still waits for every member, wherever it runs
+    assert rig.overrides["talker"]["barrier_nodes"] == ["/listener"]
+    assert [n.name for n in Launcher(graph).local_nodes] == ["listener", "talker"]
+    with pytest.raises(GraphError, match=r"no host 'tunnel'.*workstation, rig"):
+        Launcher(graph, hosts=["tunnel"])
+    unplaced = load_graph(_placed(tmp_path, {"talker": "rig"}))
+    with pytest.raises(GraphError, match="places no host for listener"):
+        Launcher(unplaced, hosts=["rig"])
+    bad = tmp_path / "bad_host.yaml"
+    bad.write_text("nodes:\n  - {name: a, package: rig_runtime, executable: talker, host: 'a b'}\n")
+    with pytest.raises(GraphError, match="'host' must be a name"):
+        load_graph(bad)
+
+
+def test_rig_launch_by_host_names_what_runs_here_and_elsewhere(tmp_path: Path) -> None:
+    graph = _placed(tmp_path, {"listener": "workstation", "talker": "rig"})
+    proc = _launch(graph, "--host", "workstation", "--duration", "30")
+    try:
+        assert wait_for(lambda: len(descendants(proc.pid)) >= 1, 20)
+        (child,) = descendants(proc.pid)
+        assert "listener" in " ".join(child.cmdline())
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert "host workstation: starting listener; the other hosts start talker" in err, err
+    wrong = _launch(graph, "--host", "tunnel")
+    _, err = wrong.communicate(timeout=60)
+    assert wrong.returncode == 2 and "has no host 'tunnel'" in err, err

@@ -13,7 +13,7 @@ import os
 import signal
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +52,7 @@ class Outcome:
     fs: float  # the plan's sample rate [Hz]
     stalled: str | None = None  # the identifier or the stream stalled (liveness.py)
     plan_ended: bool = False  # the generator said the plan ended (plan_end on the segments)
+    flow_events: list[dict[str, Any]] = field(default_factory=list)  # rig_runtime.flow
 
 
 def add_parser(subparsers: Any) -> None:
@@ -67,6 +68,15 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--out", default=None, help="run directory (default runs/<date-time>)")
     p.add_argument("--rerun", choices=VIEW_MODES, default="off", help="live Rerun view")
     p.add_argument("--graph", default=None, help="graph YAML (default aero_rig config/sim.yaml)")
+    p.add_argument(
+        "--host",
+        dest="hosts",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="start only the nodes the graph places on host NAME (repeatable); the other hosts "
+        "run `rig-launch GRAPH --host OTHER` (docs/usage.md, two machines)",
+    )
     p.add_argument("--timeout", type=float, default=0.0, help="give up after S wall seconds")
     p.add_argument(
         "--quiet",
@@ -96,11 +106,11 @@ def main(args: argparse.Namespace) -> int:
     rrd = run_dir / "campaign.rrd" if args.rerun == "save" else None
     graph = with_view(graph, args.rerun, rrd)
     overrides = merge_overrides(campaign_overrides(args, run_dir), user_overrides)
-    # A simulated campaign stays on this machine unless a discovery range was chosen.
-    ros_environment.localhost_by_default(os.environ)
+    if not args.hosts:  # a simulated campaign on one machine stays on it, unless a range is set
+        ros_environment.localhost_by_default(os.environ)
     print(f"aero-rig: campaign '{args.plan}' -> {run_dir}", file=sys.stderr)
     try:
-        launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs")
+        launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs", hosts=args.hosts)
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -114,6 +124,8 @@ def main(args: argparse.Namespace) -> int:
                 "rmw_fastrtps's default)",
                 file=sys.stderr,
             )
+    if launcher.remote_nodes:
+        print(other_hosts_note(launcher), file=sys.stderr)
     outcome = launch_and_monitor(launcher, timeout=args.timeout, quiet=args.quiet)
     recovered = None
     if outcome.stalled and not launcher.failure:
@@ -147,6 +159,31 @@ def main(args: argparse.Namespace) -> int:
     )
 
 
+def other_hosts_note(launcher: Launcher) -> str:
+    """What this machine starts, and the command each other host runs for its half (with the
+    campaign's overrides of the nodes there: the plan for the generator)."""
+    graph = launcher.graph.source or "GRAPH.yaml"
+    lines = [
+        f"aero-rig: this machine starts {', '.join(n.name for n in launcher.local_nodes)}; the "
+        "start barrier waits for the other hosts' nodes, started there with:"
+    ]
+    hosts: dict[str, list[str]] = {}
+    for spec in launcher.remote_nodes:
+        hosts.setdefault(spec.host, []).append(spec.name)
+    for host, names in hosts.items():
+        sets = [
+            f"-p {name}.{key}:={value}"
+            for name in names
+            for key, value in launcher.overrides.get(name, {}).items()
+            if key != "barrier_nodes"
+        ]
+        mode = launcher.env.get(ros_environment.PUBLICATION_MODE_ENV)
+        env = f"{ros_environment.PUBLICATION_MODE_ENV}={mode} " if mode else ""
+        command = f"{env}rig-launch {graph} --host {host} {' '.join(sets)}".rstrip()
+        lines.append(f"  {host} ({', '.join(names)}): {command}")
+    return "\n".join(lines)
+
+
 def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dict[str, Any]]:
     """The parameters the campaign sets: the plan for the generator, outputs into ``run_dir``."""
     plan = args.plan
@@ -175,9 +212,9 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
     not end by itself (a node's exit, the timeout, the signal); ``Outcome.stalled`` that the
     identifier made no progress within the liveness bound after the plan's end (liveness.py).
     """
-    monitor = CampaignMonitor()
+    monitor = CampaignMonitor({spec.fq_name: spec.host for spec in launcher.remote_nodes})
     stalled: str | None = None
-    started = time.monotonic()
+    started, started_epoch = time.monotonic(), time.time()
     stopped_by: list[str] = []
 
     def _on_signal(signum: int, _frame: Any) -> None:
@@ -204,8 +241,15 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
             note = monitor.liveness.silent_mid_run(now, stopped)
             if note:
                 progress.write(f"aero-rig: warning: {note}")
+            for event in monitor.flow.check(now):
+                warning = "warning: " if event.kind in ("stuck", "partition") else ""
+                progress.write(f"aero-rig: {warning}{event.text}")
+            monitor.liveness.cut_off = cut_off_note(monitor.flow.partitioned(), now)
             if reason is None:
                 stalled = monitor.liveness.check(now, stopped)
+                if stalled and (stuck := monitor.flow.stuck_readers()):
+                    names = ", ".join(f"{topic} at {node}" for node, topic in stuck)
+                    stalled += f"; stuck reader(s): {names}"
                 reason = stalled
             if timeout and time.monotonic() - started > timeout:
                 reason = f"timeout after {timeout:g} s"
@@ -233,7 +277,20 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
         monitor.fs,
         stalled,
         plan_ended=monitor.liveness.plan_end_at is not None,
+        flow_events=[
+            {
+                **e.to_dict(),
+                "at_s": round(e.at - started, 3),  # from the campaign's start
+                "epoch_s": round(started_epoch + e.at - started, 3),
+            }
+            for e in monitor.flow.events
+        ],
     )
+
+
+def cut_off_note(partitioned: dict[str, float], now: float) -> str:
+    """``host 'rig' for 21 s`` for the hosts cut off now (rig_runtime.flow), else ''."""
+    return ", ".join(f"host {h!r} for {now - since:.0f} s" for h, since in partitioned.items())
 
 
 def recover_from_bag(run_dir: Path, launcher: Launcher, stalled: str) -> dict[str, Any] | None:
@@ -340,6 +397,8 @@ def summarise(
         "clean": not problems,
         "problems": problems,
         "recovered_from_bag": recovered,
+        # stuck readers and partitions, at seconds from the campaign's start (rig_runtime.flow)
+        "flow_events": outcome.flow_events,
     }
     (run_dir / "campaign.json").write_text(json.dumps(summary, indent=1))
     print_results(run_dir, summary, bad)

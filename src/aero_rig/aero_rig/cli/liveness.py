@@ -61,6 +61,9 @@ class Liveness:
     published: int = 0  # samples the generator has published
     published_at: float | None = None  # when that count last changed
     warned: set[str] = field(default_factory=set)
+    # The generator's host is cut off (rig_runtime.flow's partition), e.g. "host 'rig' for 21 s":
+    # a silent generator is then named as unreachable, not as paused, hung or gone.
+    cut_off: str = ""
 
     def plan_seen(self, now: float) -> None:
         if self.plan_at is None:
@@ -140,9 +143,14 @@ class Liveness:
         if still <= self.bound_s:
             return None
         if now - self.stream_at > self.bound_s:
+            why = (
+                f"cut off by a partition: {self.cut_off}"
+                if self.cut_off
+                else "paused, hung or gone"
+            )
             what = (
                 f"the generator is silent: its last heartbeat came {now - self.stream_at:.0f} s "
-                f"ago, at {self.published} of {self.total} samples published (paused, hung or gone)"
+                f"ago, at {self.published} of {self.total} samples published ({why})"
             )
         else:
             what = (

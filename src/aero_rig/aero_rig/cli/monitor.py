@@ -1,11 +1,14 @@
-"""The campaign's in-process observer: the plan, the progress and the identifier's state."""
+"""The campaign's in-process observer: the plan, the progress, the identifier's state and the
+flow of the streams (rig_runtime.flow)."""
 
 import json
 import time
+from collections.abc import Mapping
 from typing import Any
 
 from multisine_gen.plan import PlanError
 from multisine_gen.plan_format import read_plan_message
+from rig_runtime.flow import FlowWatch, flow_reports
 from rig_runtime.interface import (
     DIAGNOSTICS,
     EXPERIMENT_PLAN,
@@ -19,10 +22,13 @@ from .liveness import Liveness, stall_bound_s
 class CampaignMonitor:
     """In-process observer: progress from segment events, end from the identifier's status."""
 
-    def __init__(self) -> None:
+    def __init__(self, remote: Mapping[str, str] | None = None) -> None:
+        """``remote``: ``{node fq name: host}`` of the graph's nodes that other machines run."""
         from rig_runtime.node import Node
 
         self.liveness = Liveness(stall_bound_s())
+        self.t0_ns: int | None = None  # the stamp of plan sample 0
+        self.flow = FlowWatch(dict(remote or {}), describe_stamp=self.describe_stamp)
         self.node = Node("aero_rig_campaign", argv=[])
         self.total = 0
         self.revision = -1  # of the plan held (an adaptive run revises it)
@@ -47,8 +53,20 @@ class CampaignMonitor:
             DIAGNOSTICS.type, DIAGNOSTICS.name, self._diagnostics, DIAGNOSTICS.qos, depth=100
         )
 
+    def describe_stamp(self, stamp_ns: int) -> str:
+        """``sample k`` of the plan for a stream stamp (t0 + k/fs), else the stamp."""
+        if not stamp_ns:
+            return "none"
+        if self.t0_ns is None or not self.fs:
+            return f"stamped {stamp_ns} ns"
+        return f"sample {round((stamp_ns - self.t0_ns) * self.fs / 1e9)}"
+
     def _diagnostics(self, msg: Any) -> None:
-        """The generator's stream heartbeat (generator_node.publish_diagnostics)."""
+        """The generator's stream heartbeat (generator_node.publish_diagnostics) and every
+        node's flow report (rig_runtime.flow)."""
+        now = time.monotonic()
+        for node, flows in flow_reports(msg):
+            self.flow.report(now, node, flows)
         for status in msg.status:
             if status.hardware_id != "generator":
                 continue
@@ -61,12 +79,13 @@ class CampaignMonitor:
 
     def _plan(self, msg: Any) -> None:
         try:
-            plan, _ = read_plan_message(msg.data)
+            plan, t0_ns = read_plan_message(msg.data)
         except PlanError:
             return  # the identifier refuses it, naming why, and the graph stops
         if plan.revision < self.revision:
             return
         self.revision = plan.revision
+        self.t0_ns = t0_ns
         self.total = plan.total_samples
         self.fs = plan.fs
         self.liveness.total = plan.total_samples

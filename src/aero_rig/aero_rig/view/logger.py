@@ -24,7 +24,7 @@ from rig_runtime.interface import (
     PRESSURE_TAPS,
     joint_position,
 )
-from rig_runtime.messages import deserialize
+from rig_runtime.messages import cdr_stamp_ns, deserialize
 
 from .blueprint import (
     BLUE,
@@ -48,15 +48,6 @@ from .blueprint import (
 STATUS_LEVELS = {0: "INFO", 1: "WARN", 2: "ERROR", 3: "WARN"}
 STAMPED = ("command", "state", "coefficients", "taps", "taps_drawn")
 MAX_WARNED = 100  # subjects the view names on /events/view; more are only counted
-
-
-def cdr_stamp_ns(cdr: bytes | memoryview) -> int:
-    """The header stamp [ns] of a serialized stamped message, without deserializing it: after
-    the 4-byte encapsulation header (its second byte 1: little-endian) a std_msgs/Header begins
-    with its stamp, int32 sec and uint32 nanosec (OMG DDS-XTypes 1.3, §7.4.3 CDR)."""
-    order = "<" if cdr[1] & 1 else ">"
-    sec, nanosec = struct.unpack_from(order + "iI", cdr, 4)
-    return sec * 1_000_000_000 + nanosec
 
 
 def _float_array(values: Any) -> np.ndarray:

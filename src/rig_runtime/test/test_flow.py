@@ -1,0 +1,159 @@
+"""The streams' flow reports and their judge (rig_runtime.flow): stuck readers, partitions."""
+
+from rig_runtime.diagnostics import OK, diagnostic_array
+from rig_runtime.flow import (
+    FLOW_PERIOD_S,
+    FLOW_STATUS_SUFFIX,
+    SILENT_S,
+    STUCK_S,
+    EndpointFlow,
+    FlowWatch,
+    flow_reports,
+    flow_values,
+    parse_flow,
+)
+from rig_runtime.messages import new_message
+
+STATE = "/pitch/state"
+MS = 1_000_000  # ns
+
+
+class _Maker:
+    """What diagnostic_array needs of a node."""
+
+    def new_message(self, type_name: str, **fields: object) -> object:
+        return new_message(type_name, **fields)
+
+
+def _writer(stamp: int, count: int = 1) -> dict[tuple[str, str], EndpointFlow]:
+    return {("writer", STATE): EndpointFlow(count, stamp)}
+
+
+def _reader(stamp: int, count: int = 1) -> dict[tuple[str, str], EndpointFlow]:
+    return {("reader", STATE): EndpointFlow(count, stamp)}
+
+
+Stream = tuple[int, bool] | None  # (stamp ns, advancing 1 ms per report) or silent
+
+
+def _run(watch: FlowWatch, t0: float, t1: float, writer: Stream, reader: Stream) -> list[str]:
+    """Both nodes report every period from t0 to t1 (None: that node is silent); the kinds of
+    the events concluded."""
+    kinds = []
+    t = t0
+    while t < t1:
+        step = round((t - t0) / FLOW_PERIOD_S) * MS
+        for node, stream, flows in (("/sim_actuator", writer, _writer),
+                                    ("/recorder", reader, _reader)):  # fmt: skip
+            if stream is not None:
+                stamp, moving = stream
+                watch.report(t, node, flows(stamp + step if moving else stamp))
+        kinds += [e.kind for e in watch.check(t)]
+        t += FLOW_PERIOD_S
+    return kinds
+
+
+def test_a_report_reads_back_from_a_diagnostic_array() -> None:
+    values = flow_values([("writer", STATE, 12, 345), ("reader", "/pitch/command", 3, 0)])
+    values["state"] = "streaming"  # other values of the status are not flow
+    msg = diagnostic_array(_Maker(), "/sim_actuator" + FLOW_STATUS_SUFFIX, OK, "", "/sim_actuator",
+                           values)  # fmt: skip
+    ((node, flows),) = list(flow_reports(msg))
+    assert node == "/sim_actuator"
+    assert flows == {
+        ("writer", STATE): EndpointFlow(12, 345),
+        ("reader", "/pitch/command"): EndpointFlow(3, 0),
+    }
+    assert parse_flow({"writer /x": "not numbers", "reader y": "1 2"}) == {}
+
+
+def test_a_reader_that_stops_while_its_writer_goes_on_is_named_within_two_seconds() -> None:
+    watch = FlowWatch(describe_stamp=lambda ns: f"stamp {ns // MS} ms")
+    assert (
+        _run(watch, 0.0, 5.0, writer=(1000 * MS, True), reader=(1000 * MS, True)) == []
+    )  # both advance
+    stopped_at = 5.0
+    kinds = _run(watch, stopped_at, 5.0 + STUCK_S + 2 * FLOW_PERIOD_S, writer=(1010 * MS, True),
+                 reader=(1009 * MS, False))  # fmt: skip
+    assert kinds == ["stuck"]
+    (event,) = watch.events
+    assert event.at - stopped_at <= 2.0
+    assert event.detail["topic"] == STATE and event.detail["node"] == "/recorder"
+    assert event.detail["writer"] == "/sim_actuator"
+    assert event.detail["last_stamp_ns"] == 1009 * MS
+    assert "reader stuck: /pitch/state at /recorder" in event.text
+    assert "stamp 1009 ms" in event.text
+    assert watch.stuck_readers() == [("/recorder", STATE)]
+    # it is named once, and again when it receives
+    assert _run(watch, 8.0, 9.0, writer=(2000 * MS, True), reader=(1009 * MS, False)) == []
+    assert _run(watch, 9.0, 9.5, writer=(2000 * MS, True), reader=(2000 * MS, True)) == [
+        "receiving"
+    ]
+    assert watch.stuck_readers() == []
+
+
+def test_paused_slow_and_idle_readers_and_writers_are_not_stuck() -> None:
+    # a reader that has received nothing yet, long before the stream starts
+    watch = FlowWatch()
+    assert _run(watch, 0.0, 10.0, writer=(0, False), reader=(0, False)) == []
+    assert (
+        _run(watch, 10.0, 11.0, writer=(1 * MS, True), reader=(0, False)) == []
+    )  # the stream just started
+    # a paused reader reports nothing; the writer goes on
+    watch = FlowWatch()
+    _run(watch, 0.0, 2.0, writer=(1 * MS, True), reader=(1 * MS, True))
+    assert _run(watch, 2.0, 10.0, writer=(10 * MS, True), reader=None) == []
+    # a writer paused right after its report: the reader stands behind it, the writer is silent
+    watch = FlowWatch()
+    _run(watch, 0.0, 2.0, writer=(1 * MS, True), reader=(1 * MS, True))
+    watch.report(2.0, "/sim_actuator", _writer(50 * MS))
+    assert _run(watch, 2.1, 10.0, writer=None, reader=(40 * MS, False)) == []
+    # a slow reader behind its writer, but moving
+    watch = FlowWatch()
+    assert _run(watch, 0.0, 10.0, writer=(100 * MS, True), reader=(1 * MS, True)) == []
+    # a stream that ended: the reader holds the writer's last sample
+    assert _run(watch, 10.0, 20.0, writer=(500 * MS, False), reader=(500 * MS, False)) == []
+
+
+def _hosts(watch: FlowWatch, t0: float, t1: float, rig: bool) -> list[str]:
+    kinds, t = [], t0
+    while t < t1:
+        if rig:
+            watch.report(t, "/generator", {})
+            watch.report(t, "/lift", {})
+        watch.report(t, "/identifier", {})
+        kinds += [e.kind for e in watch.check(t)]
+        t += FLOW_PERIOD_S
+    return kinds
+
+
+def test_a_host_whose_nodes_all_fall_silent_is_named_cut_off_and_rejoined() -> None:
+    watch = FlowWatch({"/generator": "rig", "/lift": "rig"})
+    assert _hosts(watch, 0.0, 5.0, rig=True) == []
+    kinds = _hosts(watch, 5.0, 5.0 + SILENT_S + 0.6, rig=False)
+    assert kinds == ["partition"]
+    (event,) = watch.events
+    assert event.detail["host"] == "rig" and event.detail["nodes"] == ["/generator", "/lift"]
+    assert event.at - 5.0 <= SILENT_S + FLOW_PERIOD_S + 0.5
+    assert list(watch.partitioned()) == ["rig"]
+    assert _hosts(watch, 10.0, 20.0, rig=False) == []  # named once
+    assert _hosts(watch, 20.0, 21.0, rig=True) == ["rejoined"]
+    assert watch.events[-1].detail["silent_s"] > 14
+    assert watch.partitioned() == {}
+
+
+def test_one_silent_node_or_a_silent_machine_is_no_partition() -> None:
+    watch = FlowWatch({"/generator": "rig", "/lift": "rig"})
+    _hosts(watch, 0.0, 5.0, rig=True)
+    t = 5.0
+    while t < 10.0:  # the generator paused: the lift on the same host goes on
+        watch.report(t, "/lift", {})
+        watch.report(t, "/identifier", {})
+        assert watch.check(t) == []
+        t += FLOW_PERIOD_S
+    # nothing heard from anyone (this host starved too): nothing to compare with
+    assert [e.kind for e in watch.check(30.0)] == []
+    # one machine: no remote host, no partition
+    watch = FlowWatch()
+    watch.report(0.0, "/generator", {})
+    assert watch.check(10.0) == []
