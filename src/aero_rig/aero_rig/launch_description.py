@@ -13,7 +13,9 @@ The graph description that rig-launch and aero-rig run (rig_runtime.graph) is al
 - ``record:=true`` adds ``ros2 bag record -s mcap`` of the recorder's topics (the docs/design.md §4
   topics) into ``<run_dir>/rosbag2``: rosbag2's own recording beside the project's;
 - ``graph:=...`` picks another graph: a path, ``pkg://<package>/<path>`` or a file name in
-  aero_rig's config directory (``graph:=rig`` = ``rig.yaml``).
+  aero_rig's config directory (``graph:=rig`` = ``rig.yaml``);
+- ``host:=rig`` (comma-separated names) launches only the nodes the graph places on those
+  machines, as ``rig-launch --host``: one launch per machine of a lab (docs/usage.md).
 
 The .launch.py files only call :func:`generate_graph_launch_description`. The graph file is
 read and checked by ``rig_runtime.graph`` (the one graph-description model, shared with
@@ -114,18 +116,21 @@ def stop_on_exit(node: NodeSpec) -> Callable[[Any, Any], list[Any] | None]:
     return on_exit
 
 
-def graph_actions(graph: GraphSpec, run_dir: str) -> list[Any]:
+def graph_actions(graph: GraphSpec, run_dir: str, hosts: Sequence[str] | None = None) -> list[Any]:
     """The launch actions of a graph: its Nodes and the conditional ros2 bag record.
 
     ``run_dir`` receives the recorder's bag (``bag``), the identifier's models and report, and
-    the rosbag2 recording (``rosbag2``); it is not created here.
+    the rosbag2 recording (``rosbag2``); it is not created here. ``hosts``: only the nodes
+    placed on those machines (None: every node); the start barrier still waits for all.
     """
     from launch.actions import ExecuteProcess
     from launch.conditions import IfCondition
     from launch.substitutions import LaunchConfiguration
     from launch_ros.actions import Node
 
-    nodes = graph.nodes
+    if hosts is not None:
+        graph.check_hosts(hosts)
+    nodes = [n for n in graph.nodes if n.on(hosts)]
     for node in nodes:
         reason = VENV_ONLY.get((node.package, node.executable))
         if reason:
@@ -158,7 +163,7 @@ def graph_actions(graph: GraphSpec, run_dir: str) -> list[Any]:
                 **({"prefix": f"nice -n {node.nice}"} if node.nice else {}),
             )
         )
-    topics = recorded_topics(nodes)
+    topics = recorded_topics(graph.nodes)
     # Positional topics: accepted by every Jazzy ros2bag (later releases prefer --topics).
     actions.append(
         ExecuteProcess(
@@ -179,7 +184,9 @@ def _launch_setup(context: Any, *_args: Any, **_kwargs: Any) -> list[Any]:
     graph = load_graph(path)
     # Absolute, so the launch log names the place; nodes inherit the launch's cwd anyway.
     run_dir = os.path.abspath(LaunchConfiguration("run_dir").perform(context) or default_run_dir())
-    actions = graph_actions(graph, run_dir)  # checks before creating anything
+    hosts = [h.strip() for h in LaunchConfiguration("host").perform(context).split(",")]
+    # checks before creating anything
+    actions = graph_actions(graph, run_dir, [h for h in hosts if h] or None)
     if os.path.isdir(run_dir) and os.listdir(run_dir):
         raise GraphError(f"run directory {run_dir} exists and is not empty; use run_dir:=NEW")
     os.makedirs(run_dir, exist_ok=True)
@@ -207,6 +214,12 @@ def generate_graph_launch_description(default_graph: str) -> Any:
                 default_value="false",
                 description="true: also record the recorder's topics with "
                 "`ros2 bag record -s mcap` into <run_dir>/rosbag2",
+            ),
+            DeclareLaunchArgument(
+                "host",
+                default_value="",
+                description="launch only the nodes the graph places on these hosts "
+                "(comma-separated, e.g. rig); empty: every node",
             ),
             DeclareLaunchArgument(
                 "run_dir",

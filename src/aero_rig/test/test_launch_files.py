@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 import yaml
 
-from rig_runtime.graph import entry_point, load_graph
+from rig_runtime.graph import GraphError, entry_point, load_graph
 from rig_runtime.interface import IDENTIFICATION_MODEL, PITCH_COMMAND, WING_COEFFICIENTS
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -162,7 +162,8 @@ def test_launch_arguments(launch_file: str, graph: str) -> None:
         for e in _description(launch_file).entities
         if isinstance(e, DeclareLaunchArgument)
     }
-    assert set(declared) == {"graph", "record", "run_dir"}
+    assert set(declared) == {"graph", "host", "record", "run_dir"}
+    assert declared["host"]["default_value"] == ""
     assert Path(declared["graph"]["default_value"]) == CONFIG / graph
     assert declared["record"]["default_value"] == "false"
     assert all(kwargs["description"] for kwargs in declared.values())
@@ -200,6 +201,25 @@ def test_one_node_per_graph_node(launch_file: str, graph: str, tmp_path: Path) -
                     n.fq_name for n in spec.nodes if n.barrier == "member"
                 ]
         assert node["remappings"] == list(expected.remappings.items())
+
+
+@pytest.mark.usefixtures("ros_stubs")
+@pytest.mark.parametrize(("launch_file", "graph"), LAUNCH_FILES.items())
+def test_host_launches_only_that_machines_nodes(
+    launch_file: str, graph: str, tmp_path: Path
+) -> None:
+    spec = load_graph(CONFIG / graph)
+    rig = _nodes(_launch(launch_file, run_dir=str(tmp_path / "rig"), host="rig"))
+    assert list(rig) == [n.name for n in spec.nodes if n.host == "rig"]
+    assert "identifier" not in rig and "generator" in rig
+    # the lead's barrier still names the workstation's members
+    (lead,) = [n for n in spec.nodes if n.barrier == "lead"]
+    (overrides,) = [p for p in rig[lead.name].kwargs["parameters"] if isinstance(p, dict)]
+    assert "/identifier" in overrides["barrier_nodes"]
+    both = _nodes(_launch(launch_file, run_dir=str(tmp_path / "both"), host="rig, workstation"))
+    assert list(both) == [n.name for n in spec.nodes]
+    with pytest.raises(GraphError, match="no host 'tunnel'"):
+        _launch(launch_file, run_dir=str(tmp_path / "bad"), host="tunnel")
 
 
 @pytest.mark.parametrize(
@@ -271,7 +291,6 @@ def test_default_run_dir_is_new_per_run(tmp_path: Path, monkeypatch: pytest.Monk
 
 @pytest.mark.usefixtures("ros_stubs")
 def test_a_used_run_dir_is_refused(tmp_path: Path) -> None:
-    from rig_runtime.graph import GraphError
 
     (tmp_path / "models.json").write_text("{}")
     with pytest.raises(GraphError, match="not empty"):
@@ -322,7 +341,6 @@ def test_graph_argument_runs_any_graph_file(tmp_path: Path) -> None:
 
 @pytest.mark.usefixtures("ros_stubs")
 def test_bad_graphs_are_refused_with_a_reason(tmp_path: Path) -> None:
-    from rig_runtime.graph import GraphError
 
     run = str(tmp_path / "run")
     with pytest.raises(GraphError, match="cannot run under ros2 launch: the Rerun view"):
