@@ -133,7 +133,7 @@ DIAGNOSTICS = Topic(
     "/diagnostics",
     "diagnostic_msgs/msg/DiagnosticArray",
     "default",
-    "ROS diagnostics: safety events, link state, tap exclusions",
+    "ROS diagnostics: safety events, link state, tap exclusions, each node's stream flow",
 )
 
 TOPICS: tuple[Topic, ...] = (
