@@ -1,5 +1,9 @@
-"""The streams' flow reports and their judge (rig_runtime.flow): stuck readers, partitions."""
+"""The streams' flow reports and their judge (rig_runtime.flow): stuck readers, partitions;
+and a node's counts and its take of what its executor was not woken for (rig_runtime.node)."""
 
+import pytest
+
+from rig_runtime import Node
 from rig_runtime.diagnostics import OK, diagnostic_array
 from rig_runtime.flow import (
     FLOW_PERIOD_S,
@@ -12,7 +16,9 @@ from rig_runtime.flow import (
     flow_values,
     parse_flow,
 )
-from rig_runtime.messages import new_message
+from rig_runtime.interface import PITCH_STATE
+from rig_runtime.messages import new_message, set_stamp, stamp_to_ns
+from rig_runtime.testing import graph_env, join_graph, wait_for
 
 STATE = "/pitch/state"
 MS = 1_000_000  # ns
@@ -157,3 +163,42 @@ def test_one_silent_node_or_a_silent_machine_is_no_partition() -> None:
     watch = FlowWatch()
     watch.report(0.0, "/generator", {})
     assert watch.check(10.0) == []
+
+
+@pytest.mark.slow  # two rclpy nodes talking DDS
+def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for(
+    monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Writers and readers count what they pass and keep the last header stamp (the flow
+    report's values); a stream reader whose executor is never spun, as if it were not woken,
+    gets its samples from the flow report's take, in order, and says so in the log."""
+    join_graph(graph_env(), monkeypatch.setenv)
+    writer, reader = Node("flow_writer", argv=[]), Node("flow_reader", argv=[])
+    got: list[int] = []
+    try:
+        pub = writer.create_publisher(PITCH_STATE.type, PITCH_STATE.name, "stream")
+        sub = reader.create_subscription(
+            PITCH_STATE.type, PITCH_STATE.name, lambda m: got.append(stamp_to_ns(m.header.stamp)),
+            "stream",
+        )  # fmt: skip
+        assert wait_for(lambda: pub.subscription_count() == 1 and sub.publisher_count() == 1, 30)
+        stamps = [1_000 * MS + k * MS for k in range(50)]
+        for stamp in stamps:
+            msg = writer.new_message(PITCH_STATE.type, name=["pitch"], position=[0.0])
+            set_stamp(msg.header.stamp, stamp)
+            pub.publish(msg)
+        assert (pub.count, pub.stamp_ns) == (50, stamps[-1])
+        values = flow_values([("writer", pub.topic, pub.count, pub.stamp_ns)])
+        assert parse_flow(values) == {("writer", PITCH_STATE.name): EndpointFlow(50, stamps[-1])}
+        # the reader's executor is never spun: only the flow report's take can deliver
+        assert wait_for(lambda: (reader._take_undelivered(), len(got) == 50)[1], 30), got
+        assert got == stamps
+        assert (sub.count, sub.stamp_ns, sub.undelivered) == (50, stamps[-1], 50)
+        logged = capfd.readouterr().err
+        assert f"reader of {PITCH_STATE.name}: 50 sample(s) were held undelivered" in logged
+        # a reader that delivers on its own is left to its executor
+        reader._take_undelivered()
+        assert sub.undelivered == 50
+    finally:
+        writer.close()
+        reader.close()
