@@ -167,12 +167,14 @@ class FlowWatch:
                 self._running(writer.node, now)
                 or writer.moved_at - reader.moved_at >= 2 * FLOW_PERIOD_S
             )
-            if not went_on:
+            if not went_on or not self._running(node, now):
+                # behind while it does not run (paused, starved) is not stuck: once it runs
+                # again it has STUCK_S to catch up
                 reader.behind_since = None
                 continue
             if reader.behind_since is None:
                 reader.behind_since = now
-            if self._running(node, now) and now - reader.behind_since >= self.stuck_s:
+            if now - reader.behind_since >= self.stuck_s:
                 reader.stuck = True
                 self._emit(
                     "stuck",

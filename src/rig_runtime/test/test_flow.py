@@ -109,6 +109,9 @@ def test_paused_slow_and_idle_readers_and_writers_are_not_stuck() -> None:
     watch = FlowWatch()
     _run(watch, 0.0, 2.0, writer=(1 * MS, True), reader=(1 * MS, True))
     assert _run(watch, 2.0, 10.0, writer=(10 * MS, True), reader=None) == []
+    # ... and resumes: its first report still holds the old stamp, then it catches up
+    assert _run(watch, 10.0, 10.5, writer=(30 * MS, True), reader=(1 * MS, False)) == []
+    assert _run(watch, 10.5, 15.0, writer=(31 * MS, True), reader=(31 * MS, True)) == []
     # a writer paused right after its report: the reader stands behind it, the writer is silent
     watch = FlowWatch()
     _run(watch, 0.0, 2.0, writer=(1 * MS, True), reader=(1 * MS, True))
