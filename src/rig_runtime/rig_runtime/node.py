@@ -316,6 +316,7 @@ class Node(rclpy.node.Node):
         self._last_signature: object = None
         self._anomalies: AnomalyLog | None = None
         self._flow_pub: CdrPublisher | None = None
+        self._flow_tick = 0.0  # monotonic time of the last flow report
         # Pauses past the participant lease (start_pause_watch): how long this process did not run.
         self.paused_s: list[float] = []
         self._on_paused: list[Callable[[float], None]] = []
@@ -623,8 +624,13 @@ class Node(rclpy.node.Node):
         delivered nothing since the last report is asked directly (rmw take, as the executor
         would). Found samples are delivered in order and named in the log once per episode
         (flow.py: a reader left stuck after a pause)."""
+        now = time.monotonic()
+        # A tick late by more than a period: this process did not run (paused, starved), and
+        # what arrived meanwhile is still queued for its executor. Judge at the next tick.
+        ran = now - self._flow_tick <= 2 * FLOW_PERIOD_S
+        self._flow_tick = now
         for sub in self._cdr_subscriptions:
-            if not sub.streams or sub.count != sub.polled_at:
+            if not sub.streams or sub.count != sub.polled_at or not ran:
                 sub.polled_at = sub.count
                 continue
             taken = 0
