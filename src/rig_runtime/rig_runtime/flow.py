@@ -7,8 +7,10 @@ how many messages it has passed and the header stamp of the last one (every stre
 with a std_msgs/Header). One ``DiagnosticStatus`` per node, named ``"<node>: flow"``, its
 ``hardware_id`` the node's fully qualified name, one value per endpoint::
 
-    key "writer /pitch/state"  value "<count> <stamp ns>"
-    key "reader /pitch/command"  value "<count> <stamp ns>"
+    key "writer /pitch/state"  value "<count> <stamp ns> <matched>"
+    key "reader /pitch/command"  value "<count> <stamp ns> <matched>"
+
+(``matched``: the endpoints of the other side it is matched with, as rclpy counts them.)
 
 :class:`FlowWatch` judges those reports (the campaign's monitor feeds it):
 
@@ -40,11 +42,15 @@ class EndpointFlow:
 
     count: int
     stamp_ns: int
+    matched: int = -1  # -1: not reported
 
 
-def flow_values(endpoints: Iterable[tuple[str, str, int, int]]) -> dict[str, str]:
-    """The report's values from ``(kind, topic, count, stamp_ns)`` per endpoint."""
-    return {f"{kind} {topic}": f"{count} {stamp}" for kind, topic, count, stamp in endpoints}
+def flow_values(endpoints: Iterable[tuple[str, str, int, int, int]]) -> dict[str, str]:
+    """The report's values from ``(kind, topic, count, stamp_ns, matched)`` per endpoint."""
+    return {
+        f"{kind} {topic}": f"{count} {stamp} {matched}"
+        for kind, topic, count, stamp, matched in endpoints
+    }
 
 
 def parse_flow(values: Mapping[str, str]) -> dict[tuple[str, str], EndpointFlow]:
@@ -55,10 +61,12 @@ def parse_flow(values: Mapping[str, str]) -> dict[tuple[str, str], EndpointFlow]
         if kind not in (WRITER, READER) or not topic.startswith("/"):
             continue
         try:
-            count, stamp = (int(x) for x in value.split())
+            numbers = [int(x) for x in value.split()]
         except ValueError:
             continue
-        out[(kind, topic)] = EndpointFlow(count, stamp)
+        if len(numbers) not in (2, 3):
+            continue
+        out[(kind, topic)] = EndpointFlow(*numbers)
     return out
 
 
@@ -87,6 +95,7 @@ class _Reader:
     stamp_ns: int
     count: int
     moved_at: float  # when its stamp last moved
+    matched: int = -1  # writers it is matched with, at its last report
     behind_since: float | None = None  # since when its writer has been ahead of it, unmoved
     stuck: bool = False
 
@@ -127,8 +136,10 @@ class FlowWatch:
                     self._writers[topic] = _Writer(node, flow.stamp_ns, now)
                 continue
             reader = self._readers.get((node, topic))
+            if reader is not None:
+                reader.matched = flow.matched
             if reader is None or flow.stamp_ns != reader.stamp_ns:
-                self._readers[(node, topic)] = _Reader(flow.stamp_ns, flow.count, now)
+                self._readers[(node, topic)] = _Reader(flow.stamp_ns, flow.count, now, flow.matched)
                 if reader is not None and reader.stuck:
                     self._emit(
                         "receiving",
@@ -182,12 +193,18 @@ class FlowWatch:
                     f"reader stuck: {topic} at {node} has received nothing for "
                     f"{now - reader.behind_since:.1f} s while its writer {writer.node} went on; "
                     f"its last sample is {self.describe_stamp(reader.stamp_ns)} ({reader.count} "
-                    f"received), the writer's {self.describe_stamp(writer.stamp_ns)}",
+                    f"received), the writer's {self.describe_stamp(writer.stamp_ns)}"
+                    + (
+                        f"; it is matched with {reader.matched} writer(s)"
+                        if reader.matched >= 0
+                        else ""
+                    ),
                     topic=topic,
                     node=node,
                     writer=writer.node,
                     last_stamp_ns=reader.stamp_ns,
                     received=reader.count,
+                    matched=reader.matched,
                     writer_stamp_ns=writer.stamp_ns,
                     behind_s=round(now - reader.behind_since, 3),
                 )

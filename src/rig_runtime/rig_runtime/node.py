@@ -141,6 +141,9 @@ class CdrPublisher(CdrEndpoint):
     def subscription_count(self) -> int:
         return int(self.handle.get_subscription_count())
 
+    def matched_count(self) -> int:
+        return self.subscription_count()
+
 
 class CdrSubscription(CdrEndpoint):
     """An rclpy ``raw=True`` subscription delivering runtime messages (or the bytes)."""
@@ -150,6 +153,9 @@ class CdrSubscription(CdrEndpoint):
 
     def publisher_count(self) -> int:
         return int(self.handle.get_publisher_count())
+
+    def matched_count(self) -> int:
+        return self.publisher_count()
 
 
 def _descriptor(p: Parameter) -> Any:
@@ -614,7 +620,9 @@ class Node(rclpy.node.Node):
             ("reader", s) for s in self._cdr_subscriptions
         ]
         values = flow_values(
-            (kind, e.topic, e.count, e.stamp_ns) for kind, e in endpoints if e.streams
+            (kind, e.topic, e.count, e.stamp_ns, e.matched_count())
+            for kind, e in endpoints
+            if e.streams
         )
         name = self.fq_name + FLOW_STATUS_SUFFIX
         self._flow_pub.publish(diagnostic_array(self, name, OK, "", self.fq_name, values))

@@ -60,17 +60,18 @@ def _run(watch: FlowWatch, t0: float, t1: float, writer: Stream, reader: Stream)
 
 
 def test_a_report_reads_back_from_a_diagnostic_array() -> None:
-    values = flow_values([("writer", STATE, 12, 345), ("reader", "/pitch/command", 3, 0)])
+    values = flow_values([("writer", STATE, 12, 345, 4), ("reader", "/pitch/command", 3, 0, 1)])
     values["state"] = "streaming"  # other values of the status are not flow
     msg = diagnostic_array(_Maker(), "/sim_actuator" + FLOW_STATUS_SUFFIX, OK, "", "/sim_actuator",
                            values)  # fmt: skip
     ((node, flows),) = list(flow_reports(msg))
     assert node == "/sim_actuator"
     assert flows == {
-        ("writer", STATE): EndpointFlow(12, 345),
-        ("reader", "/pitch/command"): EndpointFlow(3, 0),
+        ("writer", STATE): EndpointFlow(12, 345, 4),
+        ("reader", "/pitch/command"): EndpointFlow(3, 0, 1),
     }
-    assert parse_flow({"writer /x": "not numbers", "reader y": "1 2"}) == {}
+    assert parse_flow({"writer /x": "not numbers", "reader y": "1 2", "writer /z": "1"}) == {}
+    assert parse_flow({"reader /x": "1 2"}) == {("reader", "/x"): EndpointFlow(1, 2, -1)}
 
 
 def test_a_reader_that_stops_while_its_writer_goes_on_is_named_within_two_seconds() -> None:
@@ -191,8 +192,8 @@ def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for
             set_stamp(msg.header.stamp, stamp)
             pub.publish(msg)
         assert (pub.count, pub.stamp_ns) == (50, stamps[-1])
-        values = flow_values([("writer", pub.topic, pub.count, pub.stamp_ns)])
-        assert parse_flow(values) == {("writer", PITCH_STATE.name): EndpointFlow(50, stamps[-1])}
+        values = flow_values([("writer", pub.topic, pub.count, pub.stamp_ns, pub.matched_count())])
+        assert parse_flow(values) == {("writer", PITCH_STATE.name): EndpointFlow(50, stamps[-1], 1)}
         # the reader's executor is never spun: only the flow report's take can deliver
         assert wait_for(lambda: (reader._take_undelivered(), len(got) == 50)[1], 30), got
         assert got == stamps
