@@ -195,7 +195,12 @@ def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for
         values = flow_values([("writer", pub.topic, pub.count, pub.stamp_ns, pub.matched_count())])
         assert parse_flow(values) == {("writer", PITCH_STATE.name): EndpointFlow(50, stamps[-1], 1)}
         # the reader's executor is never spun: only the flow report's take can deliver
-        assert wait_for(lambda: (reader._take_undelivered(), len(got) == 50)[1], 30), got
+
+        def taken_all() -> bool:
+            reader._take_undelivered()
+            return len(got) == 50
+
+        assert wait_for(taken_all, 30), got
         assert got == stamps
         assert (sub.count, sub.stamp_ns, sub.undelivered) == (50, stamps[-1], 50)
         logged = capfd.readouterr().err
