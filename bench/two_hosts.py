@@ -32,7 +32,14 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from graph_support import LAB_HOSTS, RIG, TwoHostRun, small_plan_design, two_host_campaign
+from graph_support import (
+    LAB_HOSTS,
+    WING,
+    TwoHostRun,
+    pull_cable,
+    small_plan_design,
+    two_host_campaign,
+)
 
 from multisine_gen.plan_format import plan_to_json
 from rig_runtime import netlab
@@ -40,7 +47,6 @@ from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 from rig_runtime.testing import graph_env
 
 CASES = ("one_host", "two_hosts", "static_peers", "pulled_3s", "pulled_past_lease")
-WING = ["-p", "sim_wing.preset:=repeatable_stall"]
 
 
 def one_host(plan: str, run: Path) -> dict[str, Any]:
@@ -58,21 +64,13 @@ def one_host(plan: str, run: Path) -> dict[str, Any]:
 def two_hosts(
     lab: netlab.NetLab, plan: str, run: Path, static_peers: bool, pull_s: float | None
 ) -> dict[str, Any]:
-    def pull(_campaign: Any) -> None:
-        assert pull_s is not None
-        lab.link(RIG, False)
-        try:
-            time.sleep(pull_s)  # the fault's length
-        finally:
-            lab.link(RIG, True)
-
     ran = two_host_campaign(
         lab,
         Path(plan),
         run,
         graph_env(),
         static_peers=static_peers,
-        during=pull if pull_s else None,
+        during=pull_cable(lab, pull_s) if pull_s else None,
         timeout_s=900,
     )
     figures: dict[str, Any] = {"exit": ran.code, "wall_s": round(ran.wall_s, 1)}

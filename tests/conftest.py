@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from graph_support import small_plan_design
+from graph_support import WING, small_plan_design
 
 from multisine_gen.plan_format import plan_to_json
 from rig_runtime.testing import graph_env
@@ -36,11 +36,11 @@ def small_campaign(
     small_plan: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> tuple[Path, subprocess.CompletedProcess[str]]:
     """The small plan (one level, 69 s of experiment) on the release-0.1 wing
-    (test_campaign.WING), one machine, idle: the reference of the runs that must lose nothing
+    (graph_support.WING), one machine, idle: the reference of the runs that must lose nothing
     and give the same tables under load, after a fault or on two hosts."""
     run = tmp_path_factory.mktemp("small") / "run"
     cli = [sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", str(small_plan)]
-    cli += ["-p", "sim_wing.preset:=repeatable_stall", "--out", str(run), "--quiet"]
+    cli += [*WING, "--out", str(run), "--quiet"]
     proc = subprocess.run(
         [*cli, "--timeout", "600"],
         env=graph_env(),

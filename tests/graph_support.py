@@ -23,6 +23,7 @@ from rig_runtime.barrier import ReadinessReport
 from rig_runtime.graph import package_share
 from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY, PITCH_COMMAND
 from rig_runtime.messages import stamp_to_ns
+from rig_runtime.netlab import NetLab
 from rig_runtime.node import CdrSubscription, Node
 from rig_runtime.testing import finish, node_process, pause, start_session, wait_for
 
@@ -185,12 +186,29 @@ def campaign_paused_in_turn(
     return proc.returncode, out, err, paused
 
 
+# The runs whose tables are compared use the release-0.1 wing (docs/plant.md, "Presets"): its
+# high-offset periods repeat, so Table 1 is testable on the short and small plans.
+WING = ("-p", "sim_wing.preset:=repeatable_stall")
+
 # -- the graph on two hosts (rig_runtime.netlab) ------------------------------------------------
 RIG, WORKSTATION, TOOLS = "rig", "workstation", "tools"
 LAB_HOSTS = [RIG, WORKSTATION, TOOLS]  # TOOLS: a third machine for the ros2 command
 
 
-def lab_env(lab: Any, host: str, base: dict[str, str], static_peers: bool) -> dict[str, str]:
+def pull_cable(lab: NetLab, seconds: float) -> Callable[[Any], None]:
+    """A fault: the rig's cable pulled at the switch for ``seconds``, then plugged again."""
+
+    def fault(_campaign: Any) -> None:
+        lab.link(RIG, False)
+        try:
+            time.sleep(seconds)  # the fault's length, not a wait for a peer
+        finally:
+            lab.link(RIG, True)
+
+    return fault
+
+
+def lab_env(lab: NetLab, host: str, base: dict[str, str], static_peers: bool) -> dict[str, str]:
     """The environment of ``host``'s processes: ROS's default discovery range (SUBNET,
     multicast), or ``static_peers``: LOCALHOST with the other hosts in ROS_STATIC_PEERS, as
     ROS 2 documents for reaching named machines. Asynchronous publication, as the one-host
@@ -225,13 +243,13 @@ class TwoHostRun:
 
 
 def two_host_campaign(
-    lab: Any,
+    lab: NetLab,
     plan: Path,
     run: Path,
     base_env: dict[str, str],
     *,
     static_peers: bool = False,
-    rig_overrides: Sequence[str] = ("sim_wing.preset:=repeatable_stall",),
+    rig_overrides: Sequence[str] = (WING[1],),
     during: Callable[["subprocess.Popen[str]"], None] | None = None,
     timeout_s: float = 600.0,
 ) -> TwoHostRun:

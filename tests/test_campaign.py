@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 from graph_support import (
+    WING,
     assert_lossless_and_identical,
     campaign_paused_in_turn,
 )
@@ -47,12 +48,6 @@ from rig_runtime.testing import (
 
 CLI = (sys.executable, "-m", "aero_rig.cli")
 RTF5 = ("--real-time-factor", "5")
-# The runs whose tables are compared use the release-0.1 wing (docs/plant.md, "Presets"): its
-# high-offset periods repeat, so the identification target below is testable on the short plan.
-# The default wing's stall-type regimes and clustering are tested on the plant and pipeline
-# (src/wing_sim/test/test_stall_regimes.py, tests/test_clustering_ablation.py) and measured on
-# the default campaign (README, "Stall regimes and clustering").
-WING = ("-p", "sim_wing.preset:=repeatable_stall")
 TIMEOUT_600 = ("--timeout", "600")
 
 

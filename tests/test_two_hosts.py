@@ -28,6 +28,7 @@ from graph_support import (
     TwoHostRun,
     assert_lossless_and_identical,
     lab_env,
+    pull_cable,
     two_host_campaign,
 )
 
@@ -39,33 +40,20 @@ from rig_runtime.testing import finish, graph_env, start_session, wait_for
 ROS2 = Path(sys.executable).parent / "ros2"
 RIG_NODES = ["/generator", "/lift", "/sim_actuator", "/sim_wing"]
 WORKSTATION_NODES = ["/identifier", "/recorder"]
-_WHY_NOT = netlab.unavailable()
-pytestmark = [
-    pytest.mark.ci_required,
-    pytest.mark.skipif(_WHY_NOT is not None, reason=f"no lab of hosts here: {_WHY_NOT}"),
-    pytest.mark.timeout(900),
-]
+pytestmark = [pytest.mark.ci_required, pytest.mark.timeout(900)]
 
 
 @pytest.fixture(scope="module")
 def lab() -> Iterator[netlab.NetLab]:
+    why = netlab.unavailable()
+    if why is not None:
+        pytest.skip(f"no lab of hosts here: {why}")
     with netlab.NetLab(LAB_HOSTS) as made:
         yield made
 
 
 def _flow_events(run: Path, kind: str) -> list[dict[str, Any]]:
     return [e for e in TwoHostRun.summary_of(run)["flow_events"] if e["event"] == kind]
-
-
-def _pull_cable(lab: netlab.NetLab, seconds: float) -> Any:
-    def fault(_campaign: Any) -> None:
-        lab.link(RIG, False)
-        try:
-            time.sleep(seconds)  # the fault's length, not a wait for a peer
-        finally:
-            lab.link(RIG, True)
-
-    return fault
 
 
 def test_ros2_on_a_third_host_sees_both_hosts_nodes_and_the_taps(
@@ -118,13 +106,18 @@ def test_ros2_on_a_third_host_sees_both_hosts_nodes_and_the_taps(
             hz.send_signal(2)
             finish(hz, 30)
         assert rates, "ros2 topic hz printed no rate in 60 s"
-        # the scanner streams one cloud per plan sample: the plan's rate in real time
-        assert 50.0 < rates[-1] < 1000.0, rates
+        # one cloud per plan sample, at the default plan's 200 Hz in real time
+        assert 150.0 < rates[-1] < 250.0, rates
     finally:
         for proc in halves.values():
             if proc.poll() is None:
                 proc.send_signal(2)
-        codes = {host: (finish(proc, 60), proc.returncode)[1] for host, proc in halves.items()}
+        codes = {}
+        for host, proc in halves.items():
+            try:
+                finish(proc, 60)
+            finally:
+                codes[host] = proc.returncode
     assert codes == {RIG: 0, WORKSTATION: 0}, codes
 
 
@@ -166,7 +159,7 @@ def test_static_peers_without_multicast_and_a_cable_pulled_for_3_s_lose_nothing(
     campaign names the partition while it lasts and the host's return."""
     run = tmp_path / "run"
     ran = two_host_campaign(
-        lab, small_plan, run, graph_env(), static_peers=True, during=_pull_cable(lab, 3.0)
+        lab, small_plan, run, graph_env(), static_peers=True, during=pull_cable(lab, 3.0)
     )
     assert ran.code == 0, ran.out[-3000:] + ran.err[-3000:]
     assert_lossless_and_identical(run, small_campaign[0])
@@ -189,13 +182,13 @@ def test_a_cable_pulled_past_the_lease_is_named_a_partition_and_ends_the_run(
     workstation's bag holds, and the run exits 3 listing the samples it lost."""
     run = tmp_path / "run"
     ran = two_host_campaign(
-        lab, small_plan, run, graph_env(), during=_pull_cable(lab, PARTICIPANT_LEASE_S + 5.0)
+        lab, small_plan, run, graph_env(), during=pull_cable(lab, PARTICIPANT_LEASE_S + 5.0)
     )
     assert ran.code == 3, ran.out[-3000:] + ran.err[-3000:]
     assert ran.fault_at is not None
     (partition, *_) = _flow_events(run, "partition")
-    assert partition["epoch_s"] - ran.fault_at < PARTICIPANT_LEASE_S + 2.0
-    assert partition["epoch_s"] - ran.fault_at < 3.0
+    # named within seconds, far inside the issue's bound of the lease + 2 s
+    assert 0.0 < partition["epoch_s"] - ran.fault_at < 3.0
     assert "cut off by a partition: host 'rig'" in ran.err
     assert "paused, hung or gone" not in ran.err
     summary = TwoHostRun.summary_of(run)

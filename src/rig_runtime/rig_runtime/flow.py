@@ -26,6 +26,7 @@ with a std_msgs/Header). One ``DiagnosticStatus`` per node, named ``"<node>: flo
 """
 
 from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -112,10 +113,13 @@ class FlowWatch:
     """Judges the nodes' flow reports: stuck readers, and partitions from ``remote`` hosts.
 
     ``remote``: ``{node fq name: host}`` of the nodes other machines run (empty: one machine,
-    no partition to judge). ``describe_stamp`` names a stamp for the text (e.g. a plan sample).
+    no partition to judge); ``local``: this machine's nodes. ``describe_stamp`` names a stamp
+    for the text (e.g. a plan sample).
     """
 
     remote: Mapping[str, str] = field(default_factory=dict)
+    # this machine's nodes: a partition is judged against them (empty: any node not remote)
+    local: AbstractSet[str] = field(default_factory=frozenset)
     describe_stamp: Callable[[int], str] = field(default=lambda ns: f"stamped {ns} ns")
     stuck_s: float = STUCK_S
     silent_s: float = SILENT_S
@@ -219,7 +223,11 @@ class FlowWatch:
             hosts.setdefault(host, []).append(node)
         for host, nodes in sorted(hosts.items()):
             last = [self.heard[n] for n in nodes if n in self.heard]
-            others = [t for n, t in self.heard.items() if self.remote.get(n) != host]
+            others = [
+                t
+                for n, t in self.heard.items()
+                if (n in self.local if self.local else self.remote.get(n) != host)
+            ]
             if host in self._partitioned:
                 if last and max(last) > self._partitioned[host]:
                     since = self._partitioned.pop(host)

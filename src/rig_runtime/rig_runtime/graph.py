@@ -84,11 +84,12 @@ class NodeSpec:
             args += ["--params-file", str(path)]
         overrides = {**self.parameter_overrides, **(extra_overrides or {})}
         for key, value in overrides.items():
-            args += ["-p", f"{key}:={_yaml_scalar(value)}"]
+            args += ["-p", f"{key}:={yaml_scalar(value)}"]
         return args
 
 
-def _yaml_scalar(value: Any) -> str:
+def yaml_scalar(value: Any) -> str:
+    """A value as ``-p NAME:=VALUE`` gives it: one line of YAML."""
     text = yaml.safe_dump(value, default_flow_style=True).strip()
     return text.removesuffix("\n...").removesuffix("...").strip()
 

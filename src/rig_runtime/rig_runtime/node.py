@@ -106,10 +106,9 @@ class CdrEndpoint:
     count: int = 0
     stamp_ns: int = 0
 
-    @property
-    def streams(self) -> bool:
-        """A reliable keep-all endpoint of stamped messages: its flow is reported."""
-        return (
+    def __post_init__(self) -> None:
+        # A reliable keep-all endpoint of stamped messages: its flow is reported.
+        self.streams = (
             self.profile.keep_all
             and self.profile.reliability == "reliable"
             and starts_with_header(self.type_name)
@@ -131,12 +130,12 @@ class CdrPublisher(CdrEndpoint):
     def publish_raw(self, data: bytes) -> None:
         try:
             self.handle.publish(bytes(data))
-            self.passed(data)
         except Exception as exc:  # rclpy's RCLError: say which writer and why it gave up
             raise RuntimeError(
                 f"publishing on {self.topic} failed: a reader has not acknowledged for "
                 f"{PROFILE_BLOCKING_S} s (Fast DDS's max_blocking_time), or it is gone: {exc}"
             ) from exc
+        self.passed(data)
 
     def subscription_count(self) -> int:
         return int(self.handle.get_subscription_count())
@@ -323,6 +322,7 @@ class Node(rclpy.node.Node):
         self._anomalies: AnomalyLog | None = None
         self._flow_pub: CdrPublisher | None = None
         self._flow_tick = 0.0  # monotonic time of the last flow report
+        self._flow_period_s = FLOW_PERIOD_S
         # Pauses past the participant lease (start_pause_watch): how long this process did not run.
         self.paused_s: list[float] = []
         self._on_paused: list[Callable[[float], None]] = []
@@ -611,6 +611,7 @@ class Node(rclpy.node.Node):
         if self._flow_pub is not None:
             return
         self._flow_pub = self.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name, DIAGNOSTICS.qos)
+        self._flow_period_s = period_s
         self.create_timer(period_s, self._report_flow)
 
     def _report_flow(self) -> None:
@@ -635,13 +636,14 @@ class Node(rclpy.node.Node):
         now = time.monotonic()
         # A tick late by more than a period: this process did not run (paused, starved), and
         # what arrived meanwhile is still queued for its executor. Judge at the next tick.
-        ran = now - self._flow_tick <= 2 * FLOW_PERIOD_S
+        ran = now - self._flow_tick <= 2 * self._flow_period_s
         self._flow_tick = now
+        held_since = time.time_ns() - int(self._flow_period_s * 1e9)
         for sub in self._cdr_subscriptions:
             if not sub.streams or sub.count != sub.polled_at or not ran:
                 sub.polled_at = sub.count
                 continue
-            taken = 0
+            held = 0  # taken samples received a whole period ago or earlier
             handle = sub.handle
             while True:
                 try:
@@ -651,16 +653,18 @@ class Node(rclpy.node.Node):
                     break
                 if info is None:
                     break
+                received = info[1].get("received_timestamp", 0) if len(info) > 1 else 0
+                held += 0 < received <= held_since
                 handle.callback(info[0])
-                taken += 1
             sub.polled_at = sub.count
-            if taken:
-                sub.undelivered += taken
+            if held:
+                sub.undelivered += held
                 self.logger.warning(
-                    "reader of %s: %d sample(s) were held undelivered for 0.5 s or more (its "
+                    "reader of %s: %d sample(s) were held undelivered for %g s or more (its "
                     "executor was not woken); taken now, the last stamped %d ns",
                     sub.topic,
-                    taken,
+                    held,
+                    self._flow_period_s,
                     sub.stamp_ns,
                 )
 
@@ -786,7 +790,8 @@ class Node(rclpy.node.Node):
         deadline = time.monotonic() + WRITER_LINGER_S
         late = []
         for pub in self._cdr_publishers:
-            if pub.profile.reliability != "reliable":
+            # the flow report is a heartbeat: a cut-off peer need not get the last one
+            if pub.profile.reliability != "reliable" or pub is self._flow_pub:
                 continue
             remaining = max(deadline - time.monotonic(), 0.0)
             try:

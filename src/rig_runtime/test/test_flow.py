@@ -1,7 +1,10 @@
 """The streams' flow reports and their judge (rig_runtime.flow): stuck readers, partitions;
 and a node's counts and its take of what its executor was not woken for (rig_runtime.node)."""
 
+import time
+
 import pytest
+from rclpy.duration import Duration
 
 from rig_runtime import Node
 from rig_runtime.diagnostics import OK, diagnostic_array
@@ -163,6 +166,15 @@ def test_one_silent_node_or_a_silent_machine_is_no_partition() -> None:
         t += FLOW_PERIOD_S
     # nothing heard from anyone (this host starved too): nothing to compare with
     assert [e.kind for e in watch.check(30.0)] == []
+    # a node of another graph on the domain is not this host: with the local nodes named,
+    # only they count
+    watch = FlowWatch({"/generator": "rig"}, {"/identifier"})
+    watch.report(0.0, "/generator", {})
+    watch.report(0.0, "/identifier", {})
+    watch.report(3.0, "/someone_elses_node", {})
+    assert watch.check(3.0) == []
+    watch.report(3.0, "/identifier", {})
+    assert [e.kind for e in watch.check(3.0)] == ["partition"]
     # one machine: no remote host, no partition
     watch = FlowWatch()
     watch.report(0.0, "/generator", {})
@@ -194,20 +206,28 @@ def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for
         assert (pub.count, pub.stamp_ns) == (50, stamps[-1])
         values = flow_values([("writer", pub.topic, pub.count, pub.stamp_ns, pub.matched_count())])
         assert parse_flow(values) == {("writer", PITCH_STATE.name): EndpointFlow(50, stamps[-1], 1)}
+        # every sample is in the reader's DDS history once the writer has its acknowledgement
+        assert pub.handle.wait_for_all_acked(Duration(seconds=30))
         # the reader's executor is never spun: only the flow report's take can deliver
-
-        def taken_all() -> bool:
-            reader._take_undelivered()
-            return len(got) == 50
-
-        assert wait_for(taken_all, 30), got
+        reader.start_flow_report(period_s=0.2)
+        reader._take_undelivered()  # the first tick: nothing judged yet
+        assert got == []
+        time.sleep(0.25)  # the samples are held for longer than a period: what is judged
+        reader._take_undelivered()
         assert got == stamps
         assert (sub.count, sub.stamp_ns, sub.undelivered) == (50, stamps[-1], 50)
         logged = capfd.readouterr().err
         assert f"reader of {PITCH_STATE.name}: 50 sample(s) were held undelivered" in logged
-        # a reader that delivers on its own is left to its executor
+        # a reader whose executor delivers is left to it: nothing more is taken or logged
+        for stamp in stamps[:5]:
+            msg = writer.new_message(PITCH_STATE.type, name=["pitch"], position=[0.0])
+            set_stamp(msg.header.stamp, stamp + 1_000 * MS)
+            pub.publish(msg)
+        assert wait_for(lambda: (reader.spin_once(0.05), len(got) == 55)[1], 30), len(got)
         reader._take_undelivered()
-        assert sub.undelivered == 50
+        reader._take_undelivered()
+        assert sub.undelivered == 50 and len(got) == 55
+        assert "held undelivered" not in capfd.readouterr().err
     finally:
         writer.close()
         reader.close()

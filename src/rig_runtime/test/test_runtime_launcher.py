@@ -277,5 +277,9 @@ def test_rig_launch_by_host_names_what_runs_here_and_elsewhere(tmp_path: Path) -
             os.killpg(proc.pid, signal.SIGKILL)
     assert "host workstation: starting listener; the other hosts start talker" in err, err
     wrong = _launch(graph, "--host", "tunnel")
-    _, err = wrong.communicate(timeout=60)
+    try:
+        _, err = wrong.communicate(timeout=60)
+    finally:
+        if wrong.poll() is None:
+            os.killpg(wrong.pid, signal.SIGKILL)
     assert wrong.returncode == 2 and "has no host 'tunnel'" in err, err

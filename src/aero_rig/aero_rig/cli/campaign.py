@@ -10,6 +10,7 @@ code 3 unless ``--allow-excluded``.
 import argparse
 import json
 import os
+import shlex
 import signal
 import sys
 import time
@@ -18,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from rig_runtime import ros_environment
-from rig_runtime.graph import GraphError, load_graph
+from rig_runtime.graph import GraphError, load_graph, yaml_scalar
 from rig_runtime.launcher import Launcher, parse_overrides
 
 from ..verdict import bag_problems, run_problems
@@ -111,6 +112,7 @@ def main(args: argparse.Namespace) -> int:
     print(f"aero-rig: campaign '{args.plan}' -> {run_dir}", file=sys.stderr)
     try:
         launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs", hosts=args.hosts)
+        check_campaign_host(launcher)
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -159,6 +161,23 @@ def main(args: argparse.Namespace) -> int:
     )
 
 
+def check_campaign_host(launcher: Launcher) -> None:
+    """GraphError unless this machine starts the nodes whose outputs the campaign reads: the
+    node that ends the graph (the identifier), the recorder (the bag) and the view."""
+    needed = [
+        n.name
+        for n in launcher.remote_nodes
+        if n.stops_graph or (n.package, n.executable) in (("rig_runtime", "recorder"),
+                                                         ("aero_rig", "view"))
+    ]  # fmt: skip
+    if needed:
+        hosts = sorted({n.host for n in launcher.remote_nodes if n.name in needed})
+        raise GraphError(
+            f"aero-rig campaign reads the outputs of {', '.join(needed)}: run it on their host "
+            f"(--host {' --host '.join(hosts)}), and `rig-launch` on the others"
+        )
+
+
 def other_hosts_note(launcher: Launcher) -> str:
     """What this machine starts, and the command each other host runs for its half (with the
     campaign's overrides of the nodes there: the plan for the generator)."""
@@ -172,7 +191,7 @@ def other_hosts_note(launcher: Launcher) -> str:
         hosts.setdefault(spec.host, []).append(spec.name)
     for host, names in hosts.items():
         sets = [
-            f"-p {name}.{key}:={value}"
+            f"-p {shlex.quote(f'{name}.{key}:={yaml_scalar(value)}')}"
             for name in names
             for key, value in launcher.overrides.get(name, {}).items()
             if key != "barrier_nodes"
@@ -212,7 +231,12 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
     not end by itself (a node's exit, the timeout, the signal); ``Outcome.stalled`` that the
     identifier made no progress within the liveness bound after the plan's end (liveness.py).
     """
-    monitor = CampaignMonitor({spec.fq_name: spec.host for spec in launcher.remote_nodes})
+    # Remote nodes that report their flow (every rig_runtime node does; a `barrier: none`
+    # process may not), and the host of the stream's lead (the generator).
+    remote = {n.fq_name: n.host for n in launcher.remote_nodes if n.barrier != "none"}
+    local = [n.fq_name for n in launcher.local_nodes if n.barrier != "none"]
+    lead_host = next((n.host for n in launcher.remote_nodes if n.barrier == "lead"), None)
+    monitor = CampaignMonitor(remote, local)
     stalled: str | None = None
     started, started_epoch = time.monotonic(), time.time()
     stopped_by: list[str] = []
@@ -244,7 +268,8 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
             for event in monitor.flow.check(now):
                 warning = "warning: " if event.kind in ("stuck", "partition") else ""
                 progress.write(f"aero-rig: {warning}{event.text}")
-            monitor.liveness.cut_off = cut_off_note(monitor.flow.partitioned(), now)
+            cut = {h: t for h, t in monitor.flow.partitioned().items() if h == lead_host}
+            monitor.liveness.cut_off = cut_off_note(cut, now)
             if reason is None:
                 stalled = monitor.liveness.check(now, stopped)
                 if stalled and (stuck := monitor.flow.stuck_readers()):

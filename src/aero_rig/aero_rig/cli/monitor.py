@@ -3,7 +3,7 @@ flow of the streams (rig_runtime.flow)."""
 
 import json
 import time
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
 from multisine_gen.plan import PlanError
@@ -22,13 +22,16 @@ from .liveness import Liveness, stall_bound_s
 class CampaignMonitor:
     """In-process observer: progress from segment events, end from the identifier's status."""
 
-    def __init__(self, remote: Mapping[str, str] | None = None) -> None:
-        """``remote``: ``{node fq name: host}`` of the graph's nodes that other machines run."""
+    def __init__(
+        self, remote: Mapping[str, str] | None = None, local: Collection[str] = ()
+    ) -> None:
+        """``remote``: ``{node fq name: host}`` of the graph's nodes that other machines run;
+        ``local``: those this machine runs."""
         from rig_runtime.node import Node
 
         self.liveness = Liveness(stall_bound_s())
         self.t0_ns: int | None = None  # the stamp of plan sample 0
-        self.flow = FlowWatch(dict(remote or {}), describe_stamp=self.describe_stamp)
+        self.flow = FlowWatch(dict(remote or {}), set(local), describe_stamp=self.describe_stamp)
         self.node = Node("aero_rig_campaign", argv=[])
         self.total = 0
         self.revision = -1  # of the plan held (an adaptive run revises it)
