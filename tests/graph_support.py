@@ -208,6 +208,13 @@ def pull_cable(lab: NetLab, seconds: float) -> Callable[[Any], None]:
     return fault
 
 
+def rig_launch(host: str, sets: Sequence[str]) -> list[str]:
+    """``rig-launch sim.yaml --host HOST -p SET ...`` as this interpreter runs it."""
+    sim = str(package_share("aero_rig") / "config" / "sim.yaml")
+    command = [sys.executable, "-m", "rig_runtime.launcher", sim, "--host", host]
+    return command + [arg for s in sets for arg in ("-p", s)]
+
+
 def lab_env(lab: NetLab, host: str, base: dict[str, str], static_peers: bool) -> dict[str, str]:
     """The environment of ``host``'s processes: ROS's default discovery range (SUBNET,
     multicast), or ``static_peers``: LOCALHOST with the other hosts in ROS_STATIC_PEERS, as
@@ -257,10 +264,8 @@ def two_host_campaign(
     lab's rig (generator, actuator, wing, lift) and ``aero-rig campaign --host workstation``
     on its workstation (identifier, recorder), as a lab runs it on two machines. ``during``
     (given the campaign's process) runs once the identifier holds the first realization."""
-    sim = str(package_share("aero_rig") / "config" / "sim.yaml")
     sets = [f"generator.plan:={plan}", "generator.real_time_factor:=0.0", *rig_overrides]
-    rig_cmd = [sys.executable, "-m", "rig_runtime.launcher", sim, "--host", RIG]
-    rig_cmd += [arg for s in sets for arg in ("-p", s)]
+    rig_cmd = rig_launch(RIG, sets)
     cli = [sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", str(plan)]
     cli += ["--host", WORKSTATION, "--out", str(run), "--quiet", "--timeout", str(timeout_s)]
     rig = start_session(lab.command(RIG, rig_cmd), lab_env(lab, RIG, base_env, static_peers))

@@ -29,11 +29,11 @@ from graph_support import (
     assert_lossless_and_identical,
     lab_env,
     pull_cable,
+    rig_launch,
     two_host_campaign,
 )
 
 from rig_runtime import netlab
-from rig_runtime.graph import package_share
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 from rig_runtime.testing import finish, graph_env, start_session, wait_for
 
@@ -65,7 +65,6 @@ def test_ros2_on_a_third_host_sees_both_hosts_nodes_and_the_taps(
     if not ROS2.exists():
         pytest.fail("the ros2 tools are not in the venv (make test installs them)")
     base = graph_env()
-    sim = str(package_share("aero_rig") / "config" / "sim.yaml")
     sets = {
         RIG: ["generator.plan:=default", "generator.real_time_factor:=1.0"],
         WORKSTATION: [
@@ -77,9 +76,8 @@ def test_ros2_on_a_third_host_sees_both_hosts_nodes_and_the_taps(
     }
     halves = {}
     for host in (RIG, WORKSTATION):
-        cmd = [sys.executable, "-m", "rig_runtime.launcher", sim, "--host", host]
-        cmd += [arg for s in sets[host] for arg in ("-p", s)]
-        halves[host] = start_session(lab.command(host, cmd), lab_env(lab, host, base, False))
+        command = lab.command(host, rig_launch(host, sets[host]))
+        halves[host] = start_session(command, lab_env(lab, host, base, False))
     tools_env = lab_env(lab, TOOLS, base, False)
     try:
         listed: list[str] = []

@@ -129,6 +129,11 @@ class FlowWatch:
     _writers: dict[str, _Writer] = field(default_factory=dict)  # topic
     _partitioned: dict[str, float] = field(default_factory=dict)  # host: silent since
     _told: int = 0  # events returned by check()
+    _hosts: dict[str, list[str]] = field(default_factory=dict)  # host: its nodes (of remote)
+
+    def __post_init__(self) -> None:
+        for node, host in self.remote.items():
+            self._hosts.setdefault(host, []).append(node)
 
     def report(self, now: float, node: str, flows: Mapping[tuple[str, str], EndpointFlow]) -> None:
         """One node's flow report, received at ``now``."""
@@ -218,10 +223,7 @@ class FlowWatch:
         return now - self.heard.get(node, float("-inf")) <= 2 * FLOW_PERIOD_S + 0.25
 
     def _check_hosts(self, now: float) -> None:
-        hosts: dict[str, list[str]] = {}
-        for node, host in self.remote.items():
-            hosts.setdefault(host, []).append(node)
-        for host, nodes in sorted(hosts.items()):
+        for host, nodes in sorted(self._hosts.items()):
             last = [self.heard[n] for n in nodes if n in self.heard]
             others = [
                 t

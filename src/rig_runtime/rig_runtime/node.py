@@ -102,9 +102,10 @@ class CdrEndpoint:
     topic: str
     type_name: str
     profile: QosProfile
-    # Its flow (flow.py): messages passed and, for a stream of stamped messages, the last stamp.
+    # Its flow (flow.py): messages passed, and the last one's CDR bytes (its stamp is read only
+    # when the flow is reported, not per message).
     count: int = 0
-    stamp_ns: int = 0
+    last: bytes | None = None
 
     def __post_init__(self) -> None:
         # A reliable keep-all endpoint of stamped messages: its flow is reported.
@@ -117,8 +118,12 @@ class CdrEndpoint:
     def passed(self, data: bytes) -> None:
         """Count a message (its CDR bytes) through this endpoint."""
         self.count += 1
-        if self.streams:
-            self.stamp_ns = cdr_stamp_ns(data)
+        self.last = data
+
+    @property
+    def stamp_ns(self) -> int:
+        """The header stamp of the last stream message passed (0: none, or not a stream)."""
+        return cdr_stamp_ns(self.last) if self.streams and self.last is not None else 0
 
 
 class CdrPublisher(CdrEndpoint):
@@ -558,11 +563,11 @@ class Node(rclpy.node.Node):
         the matched endpoints, so the start barrier compares counts)."""
         fq = self.fq_name
         out = [
-            _endpoint(p, "writer", f"{fq}#writer{i}", p.subscription_count())
+            _endpoint(p, "writer", f"{fq}#writer{i}", p.matched_count())
             for i, p in enumerate(self._cdr_publishers)
         ]
         out += [
-            _endpoint(s, "reader", f"{fq}#reader{i}", s.publisher_count())
+            _endpoint(s, "reader", f"{fq}#reader{i}", s.matched_count())
             for i, s in enumerate(self._cdr_subscriptions)
         ]
         return out
@@ -631,8 +636,8 @@ class Node(rclpy.node.Node):
     def _take_undelivered(self) -> None:
         """Take what a stream reader holds but its executor was not woken for: a reader that
         delivered nothing since the last report is asked directly (rmw take, as the executor
-        would). Found samples are delivered in order and named in the log once per episode
-        (flow.py: a reader left stuck after a pause)."""
+        would). What it holds is delivered in order; the samples held for a period or longer
+        are counted (``undelivered``) and logged."""
         now = time.monotonic()
         # A tick late by more than a period: this process did not run (paused, starved), and
         # what arrived meanwhile is still queued for its executor. Judge at the next tick.
