@@ -15,7 +15,7 @@ The graph description that rig-launch and aero-rig run (rig_runtime.graph) is al
 - ``graph:=...`` picks another graph: a path, ``pkg://<package>/<path>`` or a file name in
   aero_rig's config directory (``graph:=rig`` = ``rig.yaml``);
 - ``host:=rig`` (comma-separated names) launches only the nodes the graph places on those
-  machines, as ``rig-launch --host``: one launch per machine of a lab (docs/usage.md).
+  machines, as ``rig-launch --host``: one launch per machine of a lab (docs/ros_machine.md §6).
 
 The .launch.py files only call :func:`generate_graph_launch_description`. The graph file is
 read and checked by ``rig_runtime.graph`` (the one graph-description model, shared with

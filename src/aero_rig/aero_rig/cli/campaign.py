@@ -76,7 +76,7 @@ def add_parser(subparsers: Any) -> None:
         default=None,
         metavar="NAME",
         help="start only the nodes the graph places on host NAME (repeatable); the other hosts "
-        "run `rig-launch GRAPH --host OTHER` (docs/usage.md, two machines)",
+        "run `rig-launch GRAPH --host OTHER` (docs/ros_machine.md §6)",
     )
     p.add_argument("--timeout", type=float, default=0.0, help="give up after S wall seconds")
     p.add_argument(
