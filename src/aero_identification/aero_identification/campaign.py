@@ -398,16 +398,3 @@ class CampaignAssembler:
             "plan_executed_s": self.plan.duration_s,
             "decisions": list(self.decisions),
         }
-
-    def realization_end_k(self, level: int, realization: int) -> int:
-        """Plan index of the last sample of a realization's measured periods."""
-        ends = [
-            s.start_k + s.length - 1
-            for s in self._slots
-            if s.kind == "multisine" and s.key == (level, realization)
-        ]
-        return max(ends)
-
-    def sine_end_k(self, index: int) -> int:
-        slot = next(s for s in self._slots if s.kind == "sine" and s.key == index)
-        return slot.start_k + slot.length - 1

@@ -208,11 +208,6 @@ class ControllerLink:
                     self._sent_at.popitem(last=False)
         return seq
 
-    def send_heartbeat(self) -> int:
-        """Send a heartbeat carrying the present flags now; returns its sequence number."""
-        with self._lock:
-            return self._send_heartbeat_locked()
-
     def stop(self) -> int:
         """Command an immediate hold; every later heartbeat repeats STOP until a new setpoint."""
         with self._lock:

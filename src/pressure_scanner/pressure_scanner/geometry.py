@@ -35,17 +35,6 @@ def half_thickness(
     return 5.0 * thickness_ratio * (a0 * np.sqrt(x) + x * (a1 + x * (a2 + x * (a3 + x * a4))))
 
 
-def half_thickness_slope(
-    x_c: np.ndarray | float, thickness_ratio: float = NACA0018_THICKNESS
-) -> np.ndarray:
-    """d(z_t/c)/d(x/c) of the half thickness; infinite at the leading edge (x/c = 0)."""
-    x = np.asarray(x_c, dtype=float)
-    a0, a1, a2, a3, a4 = _THICKNESS_COEFFICIENTS
-    with np.errstate(divide="ignore"):
-        root_term = np.where(x > 0.0, 0.5 * a0 / np.sqrt(np.where(x > 0.0, x, 1.0)), np.inf)
-    return 5.0 * thickness_ratio * (root_term + a1 + x * (2 * a2 + x * (3 * a3 + x * 4 * a4)))
-
-
 def chord_station(phi: np.ndarray | float) -> np.ndarray:
     """x/c = (1 - cos φ)/2 of contour parameter φ (either surface)."""
     return 0.5 * (1.0 - np.cos(np.asarray(phi, dtype=float)))

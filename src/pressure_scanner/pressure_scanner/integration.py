@@ -129,10 +129,6 @@ class Coefficients:
                 text += f" (out of scanner range: {', '.join(ranged)})"
         return text
 
-    def exclusion_counts(self) -> np.ndarray:
-        """(n_taps,) how often each tap was excluded over the K samples."""
-        return self.excluded.sum(axis=0)
-
 
 def contour_weights(x_c: np.ndarray, z_c: np.ndarray) -> np.ndarray:
     """Trapezoidal weights of an ordered open polyline: (3, P) rows for C_n, C_a, C_m, so that

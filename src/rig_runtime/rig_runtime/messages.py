@@ -219,11 +219,6 @@ def deserialize(data: bytes | memoryview, type_name: str) -> Any:
     return message
 
 
-def message_type_name(msg: Any) -> str:
-    """The ROS type name of a message object (``'sensor_msgs/msg/JointState'``)."""
-    return str(msg.__msgtype__)
-
-
 def to_dict(msg: Any) -> Any:
     """A message as plain Python (dicts, lists, floats), e.g. for logging or JSON."""
     if dataclasses.is_dataclass(msg):
