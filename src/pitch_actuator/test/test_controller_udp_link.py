@@ -112,9 +112,23 @@ def test_lossy_link_never_applies_a_stale_setpoint_and_counts_every_fault(
             sent[link.send_setpoint(position)] = position
             time.sleep(max(0.0, t0 + (k + 1) / 200 - time.monotonic()))
         delivered = link.poll()
-        time.sleep(0.1)
+        # Nothing more reaches the controller; its feedback reports what it counted.
+        proxy.set_blackhole(TO_SERVER, True)
+
+        def controller_counted_all() -> bool:
+            expected = expected_counts(proxy.directions[TO_SERVER].emitted, link.session)
+            stats = link.statistics()
+            reported = (
+                stats.controller_rx_lost,
+                stats.controller_rx_duplicated,
+                stats.controller_rx_reordered,
+            )
+            return reported == (expected.lost, expected.duplicated, expected.reordered)
+
+        assert wait_until(controller_counted_all, 5.0), "the controller's counters never settled"
         proxy.stop()  # nothing more in flight after this point
-        time.sleep(0.15)
+        to_host_emitted = proxy.directions[TO_CLIENT].emitted
+        assert wait_until(lambda: link.statistics().feedback.received == len(to_host_emitted), 5.0)
         delivered += link.poll()
         host_stats = link.statistics()
     finally:
@@ -194,10 +208,13 @@ def test_losing_the_heartbeat_makes_the_controller_hold_then_ramp_to_the_safe_an
         for _ in range(40):
             link.send_setpoint(math.radians(8.0))
             time.sleep(0.005)
-        # Setpoints stop; the link's 20 Hz heartbeats alone keep the controller following.
-        time.sleep(0.5)
-        assert received, "no feedback from the controller"
-        quiet = [f for f in received[-80:]]
+        # Setpoints stop; the link's 20 Hz heartbeats alone keep the controller following,
+        # over ten heartbeats (0.5 s, past the watchdog's timeout).
+        heartbeats = link.statistics().heartbeats_sent
+        n_before = len(received)
+        assert wait_until(lambda: link.statistics().heartbeats_sent >= heartbeats + 10, 5.0)
+        assert len(received) > n_before, "no feedback from the controller"
+        quiet = received[n_before:]
         assert all(f.status & Status.ENABLED for f in quiet)
         assert all(f.target_rad == pytest.approx(math.radians(8.0)) for f in quiet)
 
@@ -212,8 +229,12 @@ def test_losing_the_heartbeat_makes_the_controller_hold_then_ramp_to_the_safe_an
         assert wait_until(lambda: received[-1].target_rad < math.radians(4.0), 1.5)
 
         # The link comes back: heartbeats alone do not resume motion ...
+        lost_in_the_cut = link.statistics().controller_rx_lost
         proxy.set_blackhole(TO_SERVER, False)
-        time.sleep(0.2)
+        # A heartbeat has arrived: the controller counts the ones the cut took as lost.
+        assert wait_until(lambda: link.statistics().controller_rx_lost > lost_in_the_cut, 2.0)
+        n_back = len(received)
+        assert wait_until(lambda: len(received) > n_back, 1.0)
         assert received[-1].status & Status.WATCHDOG
         # ... a fresh setpoint does.
         for _ in range(10):

@@ -139,6 +139,8 @@ class Listener:
         self.last = seq
         self.received += 1
         now = time.monotonic_ns()
+        if self.first_ns is None:
+            self.node.logger.info("receiving: first message %d", seq)
         self.first_ns = self.first_ns or now
         self.last_ns = now
         if self.node.params["count"] and self.received >= self.node.params["count"]:

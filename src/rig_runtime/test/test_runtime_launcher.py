@@ -6,7 +6,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import psutil
@@ -57,6 +56,23 @@ def _launch(graph: Path, *extra: str) -> subprocess.Popen[str]:
     )
 
 
+def _launch_logged(graph: Path, log: Path, *extra: str) -> subprocess.Popen[str]:
+    """The launcher with its output (every node's lines, prefixed) in ``log``."""
+    with log.open("w") as stderr:
+        return subprocess.Popen(
+            [sys.executable, "-m", "rig_runtime.launcher", str(graph), *extra],
+            env=graph_env(),
+            stderr=stderr,
+            stdout=subprocess.DEVNULL,
+            text=True,
+            start_new_session=True,
+        )
+
+
+def _logged(log: Path, line: str) -> bool:
+    return line in log.read_text(errors="replace")
+
+
 def test_crashing_node_stops_graph_nonzero_naming_it(tmp_path: Path) -> None:
     result = tmp_path / "listener.json"
     proc = _launch(_graph(tmp_path, 3, result))
@@ -87,17 +103,19 @@ def test_a_node_failing_at_start_is_named_with_its_own_error_line(tmp_path: Path
 def test_duration_and_sigterm_reap_every_child(tmp_path: Path) -> None:
     result = tmp_path / "listener.json"
     graph = _graph(tmp_path, 0, result)
-    proc = _launch(graph, "--duration", "30")
+    log = tmp_path / "launch.log"
+    proc = _launch_logged(graph, log, "--duration", "30")
     try:
-        assert wait_for(lambda: len(descendants(proc.pid)) >= 2, 20)
+        # Both nodes spinning: the talker saw the listener's subscription.
+        assert wait_for(lambda: _logged(log, "subscriber(s) matched"), 60), log.read_text()
         children = descendants(proc.pid)
-        time.sleep(1.0)
+        assert len(children) >= 2
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=30)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 0, proc.stderr.read() if proc.stderr else ""
+    assert proc.returncode == 0, log.read_text()
     assert all(process_gone(c) for c in children)
 
 
@@ -168,11 +186,12 @@ def test_nodes_stop_when_the_launcher_is_killed(tmp_path: Path) -> None:
     graph["nodes"][1]["parameter_overrides"].update(count=1_000_000, rate_hz=50.0)
     path = tmp_path / "orphans.yaml"
     path.write_text(yaml.safe_dump(graph))
-    proc = _launch(path)
+    log = tmp_path / "launch.log"
+    proc = _launch_logged(path, log)
     children: list[psutil.Process] = []
     try:
-        assert wait_for(lambda: len(descendants(proc.pid)) >= 2, 20)
-        time.sleep(3.0)  # both nodes spinning
+        # Both nodes spinning: the listener has a message.
+        assert wait_for(lambda: _logged(log, "receiving: first message"), 60), log.read_text()
         children = descendants(proc.pid)
         os.kill(proc.pid, signal.SIGKILL)  # no chance to stop anything
         proc.wait(timeout=10)

@@ -12,6 +12,7 @@ from scanner_udp_support import run_sim_scanner
 
 from pressure_scanner.scanner_client import ScannerClient, ScannerClientConfig, TapPressures
 from pressure_scanner.scanner_protocol import ChannelMap
+from rig_runtime.testing import wait_for
 from wing_sim.plant import WingPlant
 from wing_sim.sim_scanner import zero_offsets_pa
 
@@ -66,7 +67,8 @@ def test_pressures_stamps_and_stream_faults_arrive_as_sent(tmp_path: Path) -> No
             tmp_path / "err.txt",
             timeout_s=20.0,
         )
-        time.sleep(0.1)  # the last datagrams are on loopback already
+        # The last frame is the sender's last datagram: every fault before it is counted.
+        assert wait_for(lambda: bool(frames) and frames[-1].frame_counter == n_frames - 1, 5.0)
         stats = client.statistics()
     assert summary == {"frames_generated": n_frames, "frames_sent": n_frames - 4}
 
@@ -118,7 +120,7 @@ def test_tare_at_wind_off_removes_the_zero_offsets(tmp_path: Path) -> None:
             timeout_s=20.0,
         )
         result = client.wait_for_tare(2.0)
-        time.sleep(0.1)
+        assert wait_for(lambda: bool(frames) and frames[-1].frame_counter == n_frames - 1, 5.0)
     offsets = zero_offsets_pa(64, 25.0, seed)
     # Mean of 50 wind-off frames with 0.5 Pa noise: within 5 σ of the true offsets.
     np.testing.assert_allclose(result.offsets_pa, offsets, atol=5 * 0.5 / math.sqrt(n_tare))
