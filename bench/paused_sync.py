@@ -3,7 +3,7 @@
 The steps of ``tests/test_campaign.py::test_nodes_paused_in_turn_lose_nothing`` (the small
 plan, SIGSTOP/SIGCONT of generator, actuator, wing, lift, identifier and recorder in turn once
 the start barrier has passed), repeated, without the test's reference campaign. It measures the
-README's known limit on rclpy's synchronous publication (README, "Known limits"):
+known issue of rclpy's synchronous publication (docs/known_issues.md; figures: docs/results.md):
 
     RMW_FASTRTPS_PUBLICATION_MODE=SYNCHRONOUS .venv/bin/python bench/paused_sync.py --runs 8
 

@@ -300,7 +300,7 @@ def test_nodes_paused_in_turn_lose_nothing(
 ) -> None:
     """SIGSTOP/SIGCONT of each stream node in turn for 3 s mid-run: the credit stalls the
     stream, reliable keep-all delivery holds what is in flight, nothing is lost or changed.
-    (README, Known limits: what is known of pauses on rclpy)."""
+    (docs/known_issues.md: what is known of pauses on rclpy)."""
     run = tmp_path / "run"
     args = ("--plan", str(small_plan), *WING, "--quiet", *TIMEOUT_600)
     code, out, err, paused = campaign_paused_in_turn(args, run, graph_env())

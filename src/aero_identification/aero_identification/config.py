@@ -105,8 +105,8 @@ class IdentificationConfig:
     # by 1 / var(its output), the sum of the levels' squared relative errors that Table 1
     # reports; "noise": by 1 / the noise variance of its mean period (the scatter of its kept
     # periods, stall cycle-to-cycle variation included): maximum likelihood under level-
-    # dependent noise. Chosen by cross-validation (bench/level_weighting.py; README, "PNLSS
-    # against the BLA"): RMS over the levels of the held-out realizations' relative errors on
+    # dependent noise. Chosen by cross-validation (bench/level_weighting.py; docs/results.md,
+    # "Level weighting"): RMS over the levels of the held-out realizations' relative errors on
     # three plant seeds' default campaigns 0.215/0.292/0.163 none, 0.228/0.279/0.165 relative,
     # 0.328/0.580/0.226 noise (best at low and medium, worst at high), so "none" stays.
     level_weighting: str = hyper(
@@ -119,7 +119,7 @@ class IdentificationConfig:
     # level-1 BLA's subspace model of that order and scored on the validation realization;
     # the one-standard-error rule keeps the simplest adequate model. Online refits keep the
     # single structure (they must stay fast). Default grid: nx ≤ 2, since an nx = 3 candidate
-    # with degrees 2-5 costs 15-30 s alone on two cores (README, "PNLSS structure scan"). Each
+    # with degrees 2-5 costs 15-30 s alone on two cores (docs/results.md, the scan). Each
     # structure is tried from two LM starts (scan.STARTS).
     scan: bool = hyper(True, "final all-levels PNLSS by the cross-validated structure scan")
     scan_nx: tuple[int, ...] = hyper(
@@ -146,12 +146,12 @@ class IdentificationConfig:
     # their mean by this factor, and the scan rejects candidates that diverge or reach no
     # periodic steady state there (the recorded periods and two random-phase periods of the
     # same spectrum, pnlss.stress_periods). It should cover the amplitudes the model will be
-    # used at. Measured (README, "Selection that extrapolates"): F-16 fitted on levels 1-5,
+    # used at. Measured (docs/results.md, "Selection that extrapolates"): F-16 fitted on levels 1-5,
     # tested on level 7 (1.33× level 5): without the rule every candidate diverged there, with
     # 1.2 the kept one did, with 1.3 and 1.5 each is bounded and the kept one is the best there;
     # the short campaign loses its 3× high-offset target at 1.5 (a 12-parameter candidate is
     # rejected), not at 1.3; on the default campaign 0 and 1.5 keep a 19-parameter model within
-    # the spreads of 1.3's 41-parameter one (README; seed 0 again on 2026-11-26: 0.10-0.12 at low).
+    # the spreads of 1.3's 41-parameter one.
     # The single-structure fits (online refits, records without --scan) do not use it.
     scan_stress: float = hyper(
         1.3, "scan: held-out input scale a candidate must stay stable at (0: no check)", min=0.0
@@ -162,8 +162,8 @@ class IdentificationConfig:
     # error with the K-fold SE, so that a structure whose fit depends on the realization it saw
     # loses to a simpler one. Capped at the realizations (periods) there are; each split adds
     # the scan's cost once more. Default 1 (one split, the SE the held-out noise only): with 2,
-    # the default campaign's Table 1 was worse on each of three plant seeds (README,
-    # "Selection that extrapolates"), F-16's pick unchanged.
+    # the default campaign's Table 1 was worse on each of three plant seeds (docs/results.md,
+    # "Cross-fit"), F-16's pick unchanged.
     scan_splits: int = hyper(
         1, "scan: cross-fit splits per candidate (1 = one held-out realization)", min=1
     )
