@@ -213,10 +213,11 @@ def test_identifier_names_a_hole_in_the_plan_index_at_once(campaign, monkeypatch
         {kv.key: kv.value for st in msg.status for kv in st.values}
     )
     try:
-        ident.assembler = CampaignAssembler(plan, T0)
+        intake = ident.session.intake
+        intake.assembler = CampaignAssembler(plan, T0)
         for k in [*range(10), *range(30, 40)]:
-            ident._add("u", int(stamps[k]), float(u[k]))
-        assert ident.gaps == {"u": [(10, 29)], "y": []}
+            intake.add("u", int(stamps[k]), float(u[k]))
+        assert intake.gaps == {"u": [(10, 29)], "y": []}
         ident.publish_status()
         assert statuses[-1]["pitch gaps"].startswith("1 gap(s), 20 plan samples never arrived")
         assert "C_l gaps" not in statuses[-1]
@@ -231,6 +232,7 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     import os
     import signal
 
+    from aero_identification.identification_session import PendingRefit
     from aero_identification.identifier_node import PARAMETERS, Identifier
     from rig_runtime import Node
     from rig_runtime.testing import graph_env, join_graph, wait_for
@@ -238,29 +240,30 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     join_graph(graph_env(), monkeypatch.setenv)
     node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3", *NO_SCAN])
     ident = Identifier(node)
+    session = ident.session
     try:
-        ident.assembler = _assemble(campaign)
-        ident._start_refit(False, "first")
-        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
-        ident._collect()
-        assert ident.refits == 1 and not ident.errors
-        ident.models_stale = False  # a sine-only refit: the worker's kept models are reused
-        ident._start_refit(False, "second")
-        assert ident.executor is not None
-        (pid,) = [p.pid for p in ident.executor._processes.values()]
+        session.intake.assembler = _assemble(campaign)
+        session.start_refit(False, "first")
+        assert wait_for(lambda: session.job is not None and session.job.future.done(), 120)
+        session.collect()
+        assert session.refits == 1 and not session.errors
+        session.schedule.models_stale = False  # a sine-only refit: the kept models are reused
+        session.start_refit(False, "second")
+        assert session.worker.executor is not None
+        (pid,) = [p.pid for p in session.worker.executor._processes.values()]
         assert pid is not None  # a started worker
         os.kill(pid, signal.SIGKILL)
-        assert wait_for(lambda: ident.future is not None and ident.future.done(), 60)
-        ident._collect()
-        assert ident.refits == 1 and "refit failed (second)" in ident.errors[-1]
-        assert ident.models_stale  # the new worker has no models: the next refit is full
+        assert wait_for(lambda: session.job is not None and session.job.future.done(), 60)
+        session.collect()
+        assert session.refits == 1 and "refit failed (second)" in session.errors[-1]
+        assert session.schedule.models_stale  # the new worker has no models: a full refit
         # The job the worker died in is queued again (a final identification is never lost).
-        assert ident.pending[-1][:3] == (-1, False, "second")
-        ident._start_refit(True, "third")
-        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
-        ident._collect()
-        assert ident.refits == 2 and ident.final_done
-        assert ident.last_summary is not None and ident.last_summary["complete"]
+        assert session.schedule.pending[-1] == PendingRefit(-1, False, "second", True)
+        session.start_refit(True, "third")
+        assert wait_for(lambda: session.job is not None and session.job.future.done(), 120)
+        session.collect()
+        assert session.refits == 2 and session.final_done
+        assert session.last_summary is not None and session.last_summary["complete"]
     finally:
         ident.close()
         node.close()
@@ -282,22 +285,24 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
     args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false", *NO_SCAN]
     node = Node("identifier", PARAMETERS, args)
     ident = Identifier(node)
+    session = ident.session
     try:
         plan, stamps = campaign[0], campaign[1]
         seg = next(s for s in plan.segments if s.kind == "multisine" and s.period == 1)
-        ident.assembler = _assemble(campaign)
-        ident._start_refit(True, "plan end")
+        session.intake.assembler = _assemble(campaign)
+        session.start_refit(True, "plan end")
         late = Anomaly("lift/invalid/1", "lift", "invalid", int(stamps[seg.start_k + 5]), None)
         ident.on_anomaly(SimpleNamespace(data=late.to_json()))
-        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
-        ident._collect()
-        assert not ident.final_done and ident.pending and ident.pending[-1][1]
-        ident.on_timer()  # starts the final identification again, with the anomaly
-        assert ident.future is not None
-        assert wait_for(lambda: ident.future is not None and ident.future.done(), 120)
-        ident._collect()
-        assert ident.final_done
-        quality = ident.last_summary["data_quality"]
+        assert wait_for(lambda: session.job is not None and session.job.future.done(), 120)
+        session.collect()
+        pending = session.schedule.pending
+        assert not session.final_done and pending and pending[-1].final
+        session.on_timer()  # starts the final identification again, with the anomaly
+        assert session.job is not None
+        assert wait_for(lambda: session.job is not None and session.job.future.done(), 120)
+        session.collect()
+        assert session.final_done and session.last_summary is not None
+        quality = session.last_summary["data_quality"]
         assert not quality["clean"] and any("lift invalid" in a for a in quality["anomalies"])
     finally:
         ident.close()

@@ -231,86 +231,120 @@ def bla_error(earlier: PeriodicData, newest: PeriodicData) -> tuple[float, float
     return error, float(np.sqrt(noise)) / scale
 
 
+@dataclass(frozen=True)
+class PeriodPosition:
+    """Where a judged period stands in its level and in the plan."""
+
+    periods_done: int  # measured periods of this realization so far
+    last_period: bool  # the plan ends the realization here
+    realization: int  # 0-based
+    planned_realizations: int  # realizations the plan has for the level now
+    rank: tuple[int, int]  # the level's offset rank (0 = lowest) and the number of levels
+    earlier_periods: int = 0  # fewest valid periods among the earlier realizations (0: none)
+
+
 def judge_period(
     current: PeriodicData,
     level_data: PeriodicData | None,
-    periods_done: int,
-    last_period: bool,
-    realization: int,
-    planned_realizations: int,
-    rank: tuple[int, int],
+    position: PeriodPosition,
     rules: AdaptiveRules,
     bounds: Bounds,
     errors: list[float],
-    earlier_periods: int = 0,
 ) -> Verdict:
-    """The verdict after a measured period of realization ``realization`` (0-based).
+    """The verdict after a measured period: on the realization (:func:`judge_realization`)
+    until the plan ends it, then on the level (:func:`judge_level`).
 
     current: the valid periods of this realization so far (M = 1); level_data: every
     realization's valid periods so far (the newest last; the same count per realization;
-    None when fewer than two realizations have two valid periods);
-    periods_done: measured periods of this realization so far; last_period: the plan ends the
-    realization here; planned_realizations: realizations the plan has for the level now;
-    errors: the level's BLA validation errors on its earlier newest realizations (this
-    function appends the newest when a realization ends); earlier_periods: the fewest valid
-    periods among the level's earlier realizations (0 for the first).
+    None when fewer than two realizations have two valid periods); errors: the level's BLA
+    validation errors on its earlier newest realizations (the newest is appended when a
+    realization ends).
     """
+    noise_limit = rules.at(rules.noise_db, *position.rank)
+    total_limit = rules.at(rules.total_db, *position.rank)
+    if not position.last_period:
+        return judge_realization(current, position, noise_limit, rules, bounds)
+    return judge_level(level_data, position, total_limit, rules, bounds, errors)
+
+
+def judge_realization(
+    current: PeriodicData,
+    position: PeriodPosition,
+    noise_limit: float,
+    rules: AdaptiveRules,
+    bounds: Bounds,
+) -> Verdict:
+    """End the realization here, or go on: the floor, the earlier realizations' period count,
+    the noise (below ``noise_limit`` dB, the level's threshold), the regimes, and the
+    distortion where the periods are too few to show them."""
     figures: dict[str, float] = {}
-    noise_limit = rules.at(rules.noise_db, *rank)
-    total_limit = rules.at(rules.total_db, *rank)
-    if not last_period:
-        if periods_done < bounds.min_periods or current.P < 2:
-            return Verdict("go_on", f"{periods_done} of at least {bounds.min_periods} periods")
-        if current.P < earlier_periods:
-            # The nonparametric estimators take the same P from every realization
-            # (campaign_dataset): ending here would discard the earlier realizations' periods.
-            return Verdict(
-                "go_on",
-                f"{current.P} of the {earlier_periods} periods the earlier realizations have",
-            )
-        figures["noise_db"] = noise_db(current)
-        clusters, _ = dominant_periods(current)
-        figures["cluster_periods"] = clusters
-        if 0 < earlier_periods <= current.P:
-            # Further periods would be discarded by the same equal-P rule: the level's
-            # realizations decide from here (another one if it has not converged).
-            return Verdict(
-                "end_realization",
-                f"{current.P} periods, as many as the earlier realizations have (noise "
-                f"{figures['noise_db']:.1f} dB of |G|²)",
-                figures,
-            )
-        if figures["noise_db"] >= noise_limit:
-            return Verdict(
-                "go_on",
-                f"noise {figures['noise_db']:.1f} dB of |G|² ≥ {noise_limit:g} dB",
-                figures,
-            )
-        if clusters < current.P:
-            return Verdict(
-                "go_on",
-                f"its periods split into regimes (dominant cluster {clusters} of {current.P})",
-                figures,
-            )
-        if current.P < CLUSTER_PERIODS:
-            figures["distortion_db"] = distortion_db(current)
-            if figures["distortion_db"] > rules.distortion_db:
-                return Verdict(
-                    "go_on",
-                    f"nonlinear distortion {figures['distortion_db']:.1f} dB of the output > "
-                    f"{rules.distortion_db:g} dB, and {current.P} periods are too few to "
-                    f"show a split into regimes (at least {CLUSTER_PERIODS})",
-                    figures,
-                )
+    periods_done, earlier_periods = position.periods_done, position.earlier_periods
+    if periods_done < bounds.min_periods or current.P < 2:
+        return Verdict("go_on", f"{periods_done} of at least {bounds.min_periods} periods")
+    if current.P < earlier_periods:
+        # The nonparametric estimators take the same P from every realization
+        # (campaign_dataset): ending here would discard the earlier realizations' periods.
+        return Verdict(
+            "go_on",
+            f"{current.P} of the {earlier_periods} periods the earlier realizations have",
+        )
+    figures["noise_db"] = noise_db(current)
+    clusters, _ = dominant_periods(current)
+    figures["cluster_periods"] = clusters
+    if 0 < earlier_periods <= current.P:
+        # Further periods would be discarded by the same equal-P rule: the level's
+        # realizations decide from here (another one if it has not converged).
         return Verdict(
             "end_realization",
-            f"noise {figures['noise_db']:.1f} dB of |G|² < {noise_limit:g} dB after "
-            f"{periods_done} periods",
+            f"{current.P} periods, as many as the earlier realizations have (noise "
+            f"{figures['noise_db']:.1f} dB of |G|²)",
             figures,
         )
-    # The realization ends here: finish the level or add one.
-    done = realization + 1
-    more = planned_realizations - done  # realizations the plan still has for the level
+    if figures["noise_db"] >= noise_limit:
+        return Verdict(
+            "go_on",
+            f"noise {figures['noise_db']:.1f} dB of |G|² ≥ {noise_limit:g} dB",
+            figures,
+        )
+    if clusters < current.P:
+        return Verdict(
+            "go_on",
+            f"its periods split into regimes (dominant cluster {clusters} of {current.P})",
+            figures,
+        )
+    if current.P < CLUSTER_PERIODS:
+        figures["distortion_db"] = distortion_db(current)
+        if figures["distortion_db"] > rules.distortion_db:
+            return Verdict(
+                "go_on",
+                f"nonlinear distortion {figures['distortion_db']:.1f} dB of the output > "
+                f"{rules.distortion_db:g} dB, and {current.P} periods are too few to "
+                f"show a split into regimes (at least {CLUSTER_PERIODS})",
+                figures,
+            )
+    return Verdict(
+        "end_realization",
+        f"noise {figures['noise_db']:.1f} dB of |G|² < {noise_limit:g} dB after "
+        f"{periods_done} periods",
+        figures,
+    )
+
+
+def judge_level(
+    level_data: PeriodicData | None,
+    position: PeriodPosition,
+    total_limit: float,
+    rules: AdaptiveRules,
+    bounds: Bounds,
+    errors: list[float],
+) -> Verdict:
+    """The realization ended: finish the level, add a realization, or go on with the plan
+    (BLA convergence: total variance below ``total_limit`` dB, the level's threshold; the
+    dominant cluster; the model's convergence; the floor and budget). Appends the newest
+    realization's BLA error to ``errors``."""
+    figures: dict[str, float] = {}
+    done = position.realization + 1
+    more = position.planned_realizations - done  # realizations the plan still has for the level
     if level_data is None or level_data.M < 2:
         if done < bounds.min_realizations:
             return Verdict(

@@ -10,6 +10,7 @@ still streaming before the final identification.
 """
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -52,6 +53,45 @@ def equal_periods(
         lines,
         period_index=np.stack(cols, axis=1),
         realization_index=np.array([b.realization for b in blocks]),
+    )
+
+
+@dataclass(frozen=True)
+class LevelSoFar:
+    """A level's measured periods once period ``period`` of one of its realizations is in: what
+    the adaptive rules judge (adaptive.judge_period)."""
+
+    current: PeriodicData  # that realization's valid periods up to this one (M = 1)
+    level_data: PeriodicData | None  # every realization so far, equal P (None: too few yet)
+    earlier_periods: int  # the fewest valid periods among the earlier realizations (0: none)
+    realization_periods: int  # periods the plan gives that realization
+    planned_realizations: int  # realizations the plan has for the level now
+    rank: tuple[int, int]  # the level's offset rank (0 = lowest) and the number of levels
+
+
+def level_so_far(
+    assembler: CampaignAssembler, level: int, realization: int, period: int
+) -> LevelSoFar:
+    """The level's valid periods after ``period`` (0-based) of ``realization`` was measured."""
+    plan_level = next(lv for lv in assembler.plan.levels if lv.level == level)
+    lines = np.asarray(plan_level.realizations[0].excited_lines)
+    block = assembler.blocks[(level, realization)]
+    valid = np.flatnonzero(block.period_valid()[: period + 1])
+    current = PeriodicData(block.u[:, valid, None], block.y[:, valid, None], assembler.fs, lines)
+    columns = [_valid_periods(assembler.blocks[(level, m)]) for m in range(realization)]
+    columns.append(valid)
+    level_data = None
+    if min(len(c) for c in columns) >= 2 and len(columns) >= 2:
+        blocks = [assembler.blocks[(level, m)] for m in range(realization + 1)]
+        level_data = equal_periods(blocks, columns, assembler.fs, lines)
+    offsets = sorted(lv.offset_deg for lv in assembler.plan.levels)
+    return LevelSoFar(
+        current,
+        level_data,
+        earlier_periods=min((len(c) for c in columns[:-1]), default=0),
+        realization_periods=block.P,
+        planned_realizations=len(plan_level.realizations),
+        rank=(offsets.index(plan_level.offset_deg), len(offsets)),
     )
 
 

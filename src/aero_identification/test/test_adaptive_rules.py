@@ -2,10 +2,18 @@
 periodic data of a known linear system: converged, not converged, periods split into regimes,
 a dominant cluster too small, a model still improving, and the floors."""
 
+from typing import Any
+
 import numpy as np
 import pytest
 
-from aero_identification.adaptive import AdaptiveRules, Bounds, Verdict, judge_period
+from aero_identification.adaptive import (
+    AdaptiveRules,
+    Bounds,
+    PeriodPosition,
+    Verdict,
+    judge_period,
+)
 from aero_identification.data import PeriodicData
 
 N = 256
@@ -47,19 +55,22 @@ def _records(
     return PeriodicData(u, y, 1.0, LINES)
 
 
-def _judge(current: PeriodicData, level: PeriodicData | None, **kw: object) -> Verdict:
-    args: dict[str, object] = {
+def _judge(
+    current: PeriodicData,
+    level: PeriodicData | None,
+    rules: AdaptiveRules = RULES,
+    errors: list[float] | None = None,
+    **kw: Any,
+) -> Verdict:
+    where: dict[str, Any] = {
         "periods_done": current.P,
         "last_period": False,
         "realization": 0,
         "planned_realizations": 2,
         "rank": LOW,
-        "rules": RULES,
-        "bounds": BOUNDS,
-        "errors": [],
     }
-    args.update(kw)
-    return judge_period(current, level, **args)  # type: ignore[arg-type]
+    position = PeriodPosition(**{**where, **kw})
+    return judge_period(current, level, position, rules, BOUNDS, [] if errors is None else errors)
 
 
 def test_a_converged_realization_ends_and_a_noisy_one_goes_on() -> None:

@@ -22,7 +22,8 @@ from rig_runtime import ros_environment
 from rig_runtime.graph import GraphError, load_graph, yaml_scalar
 from rig_runtime.launcher import Launcher, parse_overrides
 
-from ..verdict import bag_problems, run_problems
+from ..recovery import recover_from_bag, recover_from_whole_bag, samples_missed
+from ..verdict import run_problems
 from .common import (
     EXIT_FAILED,
     EXIT_NOT_CLEAN,
@@ -131,20 +132,21 @@ def main(args: argparse.Namespace) -> int:
     outcome = launch_and_monitor(launcher, timeout=args.timeout, quiet=args.quiet)
     recovered = None
     if outcome.stalled and not launcher.failure:
-        recovered = recover_from_bag(run_dir, launcher, outcome.stalled)
+        recovered = recover_from_bag(run_dir, launcher, outcome.stalled, say)
         if recovered is None:
             launcher.failure = outcome.stalled
     elif launcher.failed_node == "identifier" and outcome.plan_ended:
         # The identifier died after the plan's end (in its final identification): the graph
         # was stopped, and the recorder closed a bag that holds the whole plan, or says what
         # it lacks (then the failure stands).
-        recovered = recover_from_whole_bag(run_dir, launcher, outcome, launcher.failure or "")
+        failure = launcher.failure or ""
+        recovered = recover_from_whole_bag(run_dir, launcher, outcome.total, failure, say)
         if recovered is not None:
             launcher.failure = None
     elif not launcher.failure and (missed := samples_missed(run_dir)):
         # The identifier finished without samples the recorder may hold (it was paused past
         # the DDS lease, which dropped it as a reader): the bag decides.
-        recovered = recover_from_whole_bag(run_dir, launcher, outcome, missed)
+        recovered = recover_from_whole_bag(run_dir, launcher, outcome.total, missed, say)
     if launcher.failure:
         print(f"aero-rig: campaign failed: {launcher.failure}", file=sys.stderr)
         print(
@@ -159,6 +161,11 @@ def main(args: argparse.Namespace) -> int:
         recovered=recovered,
         publication=launcher.env.get(ros_environment.PUBLICATION_MODE_ENV, "SYNCHRONOUS"),
     )
+
+
+def say(text: str) -> None:
+    """One line for the user on stderr, prefixed as the verb's other lines."""
+    print(f"aero-rig: {text}", file=sys.stderr)
 
 
 def check_campaign_host(launcher: Launcher) -> None:
@@ -316,77 +323,6 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
 def cut_off_note(partitioned: dict[str, float], now: float) -> str:
     """``host 'rig' for 21 s`` for the hosts cut off now (rig_runtime.flow), else ''."""
     return ", ".join(f"host {h!r} for {now - since:.0f} s" for h, since in partitioned.items())
-
-
-def recover_from_bag(run_dir: Path, launcher: Launcher, stalled: str) -> dict[str, Any] | None:
-    """The final identification from the bag, after the identifier stalled: the same pipeline
-    on the same assembler (aero_rig.offline) with the identifier's own parameters (its
-    parameter files and overrides), its report written into the run directory. None (and
-    the stall is the campaign's failure) when the bag cannot be read."""
-    from ..offline import BagError, fit_bag
-
-    bag = run_dir / "bag"
-    print(f"aero-rig: {stalled}", file=sys.stderr)
-    print(f"aero-rig: recovering the final identification from {bag}", file=sys.stderr)
-    try:
-        config = identifier_config(launcher)
-        result, data = fit_bag(bag, run_dir, config)
-    except (BagError, ValueError, OSError) as exc:
-        print(f"aero-rig: recovery from the bag failed: {exc}", file=sys.stderr)
-        return None
-    for warning in data.warnings:
-        print(f"aero-rig: warning: {warning}", file=sys.stderr)
-    return {
-        "reason": stalled,
-        "from": str(bag),
-        "samples_read": data.messages,
-        "clean": result.clean,
-    }
-
-
-def recover_from_whole_bag(
-    run_dir: Path, launcher: Launcher, outcome: Outcome, reason: str
-) -> dict[str, Any] | None:
-    """``recover_from_bag`` unless the bag is short of plan samples itself (a second fit would
-    only repeat the loss: said, and None)."""
-    short = bag_problems(run_dir / "bag", outcome.total) if outcome.total else ["no plan seen"]
-    if short:
-        print(f"aero-rig: {reason}; the bag lacks samples too ({short[0]}): no recovery",
-              file=sys.stderr)  # fmt: skip
-        return None
-    return recover_from_bag(run_dir, launcher, reason)
-
-
-def samples_missed(run_dir: Path) -> str | None:
-    """What the identifier's final report lacks that a bag may hold: plan samples missing on a
-    channel (None when none are, or there is no report)."""
-    models = run_dir / "models.json"
-    if not models.exists():
-        return None
-    samples = json.loads(models.read_text()).get("data_quality", {}).get("samples", {})
-    missing = {name: int(c.get("missing", 0)) for name, c in samples.items()}
-    if not any(missing.values()):
-        return None
-    counts = ", ".join(f"{n} {name}" for name, n in missing.items() if n)
-    return f"the identifier's final identification missed plan samples ({counts})"
-
-
-def identifier_config(launcher: Launcher) -> Any:
-    """The identifier's hyperparameters as the graph started it: its declared defaults, its
-    parameter files, the graph's and the campaign's overrides (rig_runtime.params)."""
-    from aero_identification.config import config_from_parameters
-    from aero_identification.identifier_node import PARAMETERS
-    from rig_runtime.params import assign, resolve_parameters
-
-    spec = launcher.graph.node("identifier")
-    params = resolve_parameters(PARAMETERS, spec.fq_name, spec.parameters)
-    for source, values in (
-        ("the graph", spec.parameter_overrides),
-        ("the campaign", launcher.overrides.get("identifier", {})),
-    ):
-        for name, value in values.items():
-            assign(params, name, value, source)
-    return config_from_parameters(params.as_dict())
 
 
 def summarise(
