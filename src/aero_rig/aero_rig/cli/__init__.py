@@ -1,14 +1,19 @@
 """``aero-rig``: run the pitching-wing campaign, live graphs, offline fits and views.
 
-    aero-rig campaign [--plan default|short|FILE] [--real-time-factor X] [--out DIR]
-                      [--rerun spawn|save|serve|off] [--seed N] [--allow-excluded]
-    aero-rig run sim|rig [--graph FILE] [--duration S]
-    aero-rig fit BAG [--out DIR]
+    aero-rig campaign [--plan default|short|FILE] [--seed N] [--real-time-factor X] [--out DIR]
+                      [--rerun spawn|save|serve|off] [--graph FILE] [--host NAME]
+                      [--timeout S] [--quiet] [--adaptive] [--allow-excluded]
+                      [-p NODE.PARAM:=VALUE ...]
+    aero-rig run sim|rig [--graph FILE] [--duration S] [--out DIR] [--rerun MODE]
+                         [-p NODE.PARAM:=VALUE ...]
+    aero-rig fit BAG [--out DIR] [identification options: --nx, --scan, --bootstrap B, ...]
     aero-rig fit FILE|DIR --format csv|mat --input COL --output COL --period N [--fs HZ]
-                 [--levels PATTERN...] [--estimation L...] [--validation L...] [--nx N]
+                 [--levels PATTERN...] [--estimation L...] [--validation L...]
                  [--drop-periods K] [--out DIR]
     aero-rig view BAG|live [--save FILE.rrd]
     aero-rig bag recover BAG
+
+Every option: ``aero-rig VERB --help`` and docs/usage.md.
 
 ``campaign`` launches the simulated graph (generator, simulated actuator, simulated wing, lift,
 identifier, recorder, optionally the Rerun view) as rclpy node processes, runs the plan to its
