@@ -25,8 +25,9 @@ import time
 from pathlib import Path
 
 from aero_identification.config import IdentificationConfig
-from aero_identification.pipeline import identify, record_error
+from aero_identification.pipeline import identify
 from aero_identification.records import read_records, records_dataset
+from aero_identification.validation import record_error
 
 HERE = Path(__file__).resolve().parent
 

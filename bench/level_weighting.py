@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from aero_identification.campaign_dataset import campaign_dataset
-from aero_identification.pipeline import identify, pnlss_sets
+from aero_identification.pipeline import identify
+from aero_identification.pnlss_training import pnlss_sets
 from aero_identification.scan import periodic_error
 from aero_rig.offline import read_campaign_bag, recorded_config
 

@@ -112,8 +112,9 @@ def test_every_final_report_carries_the_ablation(tmp_path: Path) -> None:
 
 def test_the_ablation_runs_beside_and_gives_what_it_gives_alone() -> None:
     """The final identification runs its ablation in a thread beside its own fits
-    (pipeline._start_ablation): the ablation's messages come from that thread, and its tables
-    are byte for byte those of the same configuration without clustering run on its own."""
+    (clustering_ablation.start_ablation): the ablation's messages come from that thread, and
+    its tables are byte for byte those of the same configuration without clustering run on its
+    own."""
     import dataclasses
     import threading
 

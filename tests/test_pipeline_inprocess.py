@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from aero_identification import pipeline
+from aero_identification import pipeline, pnlss_training
 from aero_identification.campaign import CampaignAssembler
 from aero_identification.campaign_dataset import campaign_dataset
 from aero_identification.config import IdentificationConfig
@@ -462,7 +462,7 @@ def test_scan_scheduler_runs_the_scan_and_the_bootstrap_or_says_it_cannot_be_rea
     with socket.socket() as closed:  # a port nothing listens on
         closed.bind(("127.0.0.1", 0))
         address = f"tcp://127.0.0.1:{closed.getsockname()[1]}"
-    monkeypatch.setattr(pipeline, "SCHEDULER_CONNECT_S", 2.0)
+    monkeypatch.setattr(pnlss_training, "SCHEDULER_CONNECT_S", 2.0)
     config = dataclasses.replace(BOOTSTRAP_CONFIG, scan_scheduler=address)
     lost = identify(asm, config, final=True)
     for what in ("PNLSS structure scan failed", "Table 1 estimation bootstrap failed"):

@@ -21,20 +21,39 @@ structure the scan keeps (each replicate refits the kept structure from its own 
 the spread includes the selection (Efron 2014, "Estimation and accuracy after model selection",
 JASA 109(507)). Either way the spread is a lower bound on the run-to-run scatter.
 
-This module holds the numerical pieces; `pipeline.identify` runs the replicates
-(``config.bootstrap``).
+`resample_periods` and `replicate_spreads` are the numerical pieces; `estimation_bootstrap`
+runs the replicates for `pipeline.identify` (``config.bootstrap``).
 """
 
+import dataclasses
 import math
+import time
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
+from .config import IdentificationConfig
 from .data import PeriodicData
+from .dataset import Dataset
+from .level_models import level_models
+from .models import LinearStateSpace, PNLSSModel
+from .pnlss_training import fit_client, level_weights, pnlss_sets, scan_levels
+from .results import EstimationSpread, IdentificationResult, LevelResult, Log
+from .scan import Candidate, run_fits
+from .subspace import fit_linear_ss
+from .validation import validate
 
 Cell = tuple[str, str, float]  # (model, level, frequency [Hz]), Table 1's keys
 
-__all__ = ["Cell", "replicate_spreads", "resample_periods"]
+__all__ = [
+    "BOOTSTRAP_SEED",
+    "Cell",
+    "estimation_bootstrap",
+    "refit_candidates",
+    "replicate_spreads",
+    "resample_periods",
+]
 
 
 def resample_periods(
@@ -88,3 +107,204 @@ def replicate_spreads(
         spreads[cell] = float(np.std(finite, ddof=1)) if finite.size >= 2 else math.nan
         means[cell] = float(np.mean(finite)) if finite.size else math.nan
     return spreads, means, failed
+
+
+# The replicates' random draws: fixed, so that a fit is reproducible.
+BOOTSTRAP_SEED = 20_221_125
+
+
+def refit_candidates(
+    result: IdentificationResult, config: IdentificationConfig
+) -> tuple[tuple[Candidate, int, float | None] | None, tuple[Candidate, int, float | None] | None]:
+    """The structures (candidate, LM iterations, stress scale) the estimate's all-levels and
+    level-1 PNLSS were fitted with: the scan's kept candidate, or `fit_levels`' one structure."""
+    lin = result.linear_level1
+    if lin is None:
+        return None, None
+    single = (
+        Candidate(lin.nx, tuple(config.degrees), "state+output", config.structure, "output_ls"),
+        config.max_iter,
+        None,
+    )
+    every: tuple[Candidate, int, float | None] | None = None
+    if result.scan is not None and result.pnlss_all is not None:
+        row = result.scan.best_row
+        cand = Candidate(row.nx, tuple(row.degrees), row.equations, row.structure, row.start)
+        every = (cand, config.scan_max_iter, config.scan_stress or None)
+    elif result.pnlss_all is not None:
+        every = single
+    return every, (single if result.pnlss_level1 is not None else None)
+
+
+def refit_job(
+    levels: Sequence[LevelResult],
+    how: tuple[Candidate, int, float | None],
+    config: IdentificationConfig,
+) -> tuple[Candidate, LinearStateSpace, tuple[PeriodicData, PeriodicData], dict[str, Any]] | None:
+    """One PNLSS fit of a given structure on `pnlss_sets(levels)`, from the lowest level's
+    linear model (at the candidate's order, as the scan starts it), as a job for
+    `scan.run_fits`: the candidate, its start, its (training, held-out) sets and options; None
+    when there are no held-out periods (the scan could not have scored it)."""
+    cand, max_iter, stress = how
+    data, validation, _ = pnlss_sets(levels, config)
+    if validation is None:
+        return None
+    low = levels[0]
+    assert low.linear is not None and low.bla is not None
+    lin = low.linear
+    if cand.nx != lin.nx:
+        u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
+        lin = fit_linear_ss(low.bla, nx=cand.nx).with_operating_point(u0, y0)
+    weights, val_weights = level_weights(levels, config, data, validation)
+    options = {
+        "max_iter": max_iter,
+        "record_weights": weights,
+        "validation_weights": val_weights,
+        "stress": stress,
+    }
+    return cand, lin, (data, validation), options
+
+
+def run_refits(
+    wanted: list[tuple[Candidate, LinearStateSpace, tuple[PeriodicData, PeriodicData], Any]],
+    config: IdentificationConfig,
+    client: Any,
+) -> tuple[list[PNLSSModel | None], str]:
+    """The refits' models (None where a fit failed, diverged or failed the scan's check: the
+    scan would not have kept it), on the scan's executor: ``client`` (identify's), the Dask
+    scheduler at ``scan_scheduler``, local worker processes (``scan_workers``) or this
+    process."""
+    if not wanted:
+        return [], "no refit"
+    jobs = [(cand, lin, k, options) for k, (cand, lin, _, options) in enumerate(wanted)]
+    sets = [pair for _, _, pair, _ in wanted]
+    with fit_client(config, client) as executor:
+        fits, where = run_fits(jobs, sets, executor, workers=config.scan_workers or None)
+    return [model if row.status == "ok" else None for row, model in fits], where
+
+
+def estimation_bootstrap(
+    dataset: Dataset,
+    result: IdentificationResult,
+    config: IdentificationConfig,
+    client: Any,
+    say: Log,
+) -> None:
+    """Table 1's estimation spread (bootstrap.py): ``config.bootstrap`` replicates, each with
+    every estimation level's kept periods drawn with replacement within each realization, the
+    level's BLA and linear model refitted at the estimate's order on the estimate's clusters,
+    the all-levels and level-1 PNLSS refitted with the estimate's structures, and Table 1
+    scored; each cell's spread is the std over the replicates (fixed seed: reproducible).
+    The replicates are drawn and their linear models fitted here, in order; their PNLSS refits,
+    the cost, are independent fits and run on the scan's executor (`run_refits`). With
+    ``config.bootstrap_scan`` and a scanned estimate, each replicate's all-levels PNLSS comes
+    from its own structure scan instead (`scan_levels`, one after another, each on the executor), so
+    that the spread includes the selection (Efron 2014, see config.py)."""
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    every, level1 = refit_candidates(result, config)
+    # bootstrap_scan: the estimate's kept structure, against which the replicates' are counted.
+    kept = result.scan.best_row.structure_label if result.scan is not None else ""
+    rescan = config.bootstrap_scan and bool(kept)
+    structures: list[str] = []  # what each replicate's scan kept (rescan)
+    if config.bootstrap_scan and not rescan:
+        result.warnings.append(
+            "bootstrap_scan: the all-levels PNLSS was not chosen by a structure scan (scan off "
+            "or failed), so the replicates refit its one structure"
+        )
+    # One structure for both tables: the level-1 PNLSS is the all-levels one, not refitted.
+    same = level1 is not None and result.pnlss_level1 is result.pnlss_all and every == level1
+    quiet: Log = lambda _m: None  # noqa: E731
+    replicates: list[IdentificationResult] = []
+    wanted: list[Any] = []  # the refit jobs of every replicate
+    slots: list[tuple[IdentificationResult, str]] = []  # where each job's model goes
+    for _ in range(config.bootstrap):
+        rep = IdentificationResult(config=config, fs=result.fs, sines_planned=result.sines_planned)
+        replicates.append(rep)
+        for name, res in result.levels.items():
+            data = res.record.data
+            if res.role != "estimation" or data is None or res.linear is None:
+                rep.levels[name] = res
+                continue
+            keep = None if res.clusters is None else res.clusters.keep
+            record = dataclasses.replace(res.record, data=resample_periods(data, keep, rng))
+            res_b = LevelResult(record, res.role)
+            rep.levels[name] = res_b
+            try:
+                level_models(
+                    record, res_b, config, [], quiet, clusters=res.clusters, order=res.linear.order
+                )
+            except (ValueError, np.linalg.LinAlgError):
+                res_b.linear = None  # this replicate has no model of the level: its cells fail
+        estimation = [r for r in rep.levels.values() if r.role == "estimation"]
+        ready = [r for r in estimation if r.bla is not None and r.linear is not None]
+        rep.linear_level1 = estimation[0].linear if estimation else None
+        if not ready or ready[0] is not estimation[0]:
+            if rescan:
+                structures.append("")
+            continue
+        if rescan:
+            scan = scan_levels(ready, rep, config, client, quiet)
+            rep.pnlss_all = None if scan is None else scan.best
+            structures.append("" if scan is None else scan.best_row.structure_label)
+            result.warnings.extend(
+                f"bootstrap replicate {len(replicates)}: {w}" for w in rep.warnings
+            )
+        for how, levels, slot in (
+            (None if rescan else every, ready, "pnlss_all"),
+            (None if same else level1, ready[:1], "pnlss_level1"),
+        ):
+            job = None if how is None else refit_job(levels, how, config)
+            if job is not None:
+                wanted.append(job)
+                slots.append((rep, slot))
+    try:
+        models, where = run_refits(wanted, config, client)
+    except OSError as exc:  # the Dask scheduler cannot be reached: Table 1 without spreads
+        result.warnings.append(f"Table 1 estimation bootstrap failed: {exc}")
+        return
+    for (rep, slot), fitted in zip(slots, models, strict=True):
+        setattr(rep, slot, fitted)
+    replicates_all: list[dict[Cell, float]] = []
+    replicates_level1: list[dict[Cell, float]] = []
+    for rep in replicates:
+        if same:
+            rep.pnlss_level1 = rep.pnlss_all
+        validate(dataset, rep)
+        replicates_all.append(dict(rep.errors_all))
+        replicates_level1.append(dict(rep.errors_level1))
+    spreads_all, means_all, failed_all = replicate_spreads(replicates_all, list(result.errors_all))
+    spreads_level1, means_level1, failed_level1 = replicate_spreads(
+        replicates_level1, list(result.errors_level1)
+    )
+    result.bootstrap = EstimationSpread(
+        replicates=config.bootstrap,
+        spreads_all=spreads_all,
+        spreads_level1=spreads_level1,
+        means_all=means_all,
+        means_level1=means_level1,
+        failed_all=failed_all,
+        failed_level1=failed_level1,
+        seconds=time.perf_counter() - t0,
+        kept_structure=kept if rescan else "",
+        replicate_structures=structures,
+    )
+    for table, failed in (("all levels", failed_all), ("level 1", failed_level1)):
+        for (model, level, f), n in failed.items():
+            if n:
+                result.warnings.append(
+                    f"bootstrap ({table}): {model} at {level} {f:g} Hz: the refit failed, "
+                    f"diverged or was rejected by the scan's checks in {n} of "
+                    f"{config.bootstrap} replicates (its estimation spread is over the rest)"
+                )
+    result.timings_s["bootstrap"] = result.bootstrap.seconds
+    scans = (
+        f", {len(structures)} structure scans (the estimate's structure kept in "
+        f"{result.bootstrap.same_structure})"
+        if rescan
+        else ""
+    )
+    say(
+        f"Table 1 estimation bootstrap: {config.bootstrap} replicates{scans}, {len(wanted)} "
+        f"PNLSS refits ({where}), {result.bootstrap.seconds:.1f} s"
+    )

@@ -78,7 +78,7 @@ class IdentificationConfig:
     # The paper used 50 iterations for its order scan.
     max_iter: int = hyper(100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000)
     pnlss: bool = hyper(True, "fit the PNLSS models (false: clustering, BLA and linear models)")
-    # PNLSS training and held-out data (pipeline.pnlss_sets): the held-out realization chooses
+    # PNLSS training and held-out data (pnlss_training.pnlss_sets): the held-out realization chooses
     # the iterate and scores the scan's candidates; every other realization trains.
     validation_realization: int = hyper(
         1,

@@ -71,7 +71,7 @@ ALPHA_DEG: Final = "alpha_deg"
 MEASURED: Final = "measured"
 SERIES_PREFIX: Final = "cl_"
 
-# The models pipeline._validate_sine predicts with, in Table 1's order.
+# The models validation.validate_sine predicts with, in Table 1's order.
 BLA_SS_OWN: Final = "BLA SS (own level)"
 BLA_SS_LEVEL1: Final = "BLA SS (level 1)"
 PNLSS_ALL: Final = "PNLSS (all levels)"

@@ -77,8 +77,8 @@ def exit_with_parent(poll_s: float = 0.5) -> None:
 
 
 def warm_up() -> float:
-    """Load the pipeline and its compiled kernels (see pipeline.warm_up); returns seconds."""
-    from .pipeline import warm_up as pipeline_warm_up
+    """Load the pipeline and its compiled kernels (see warm_up.warm_up); returns seconds."""
+    from .warm_up import warm_up as pipeline_warm_up
 
     return pipeline_warm_up()
 

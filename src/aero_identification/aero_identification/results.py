@@ -3,7 +3,7 @@
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -49,6 +49,8 @@ class LevelResult:
 # EstimationSpread.off_mean: a cell whose error is farther than this many estimation spreads
 # from the bootstrap refits' mean is named in the table's note (about 5 % of cells by chance
 # if the replicates' errors were normal around the estimate's).
+Log = Callable[[str], None]  # an identification's progress messages
+
 OFF_MEAN_SPREADS = 2.0
 
 
@@ -134,7 +136,7 @@ class IdentificationResult:
     pnlss_level1: PNLSSModel | None = None
     linear_level1: LinearStateSpace | None = None
     pnlss_start_level: str = ""  # the level whose linear model started the PNLSS fits
-    pnlss_held_out: str = ""  # what chose the PNLSS iterate (pipeline.pnlss_sets)
+    pnlss_held_out: str = ""  # what chose the PNLSS iterate (pnlss_training.pnlss_sets)
     errors_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
     errors_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
     # Table 1's ± per cell, same keys: std over the sine's periods of the per-period error
@@ -154,7 +156,7 @@ class IdentificationResult:
     sines_planned: bool = False  # the source plans sine records: Table 1 is part of the result
     scan: ScanResult | None = None  # the structure scan of the all-levels PNLSS (config.scan)
     # The same pipeline without clustering (config.clustering_ablation, final only) and what
-    # clustering changed (pipeline.clustering_effect()).
+    # clustering changed (clustering_ablation.clustering_effect()).
     no_clustering: "IdentificationResult | None" = None
     clustering_effect: dict[str, Any] = field(default_factory=dict)
     # Table 1's estimation spread (config.bootstrap > 0, final identification only).

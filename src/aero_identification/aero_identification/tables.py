@@ -127,7 +127,8 @@ def table1(
 
 
 def clustering_markdown(effect: Mapping[str, Any]) -> str:
-    """clustering.md: what the period clustering changed, per level (pipeline.clustering_effect)."""
+    """clustering.md: what the period clustering changed, per level
+    (clustering_ablation.clustering_effect)."""
 
     def num(value: Any, fmt: str) -> str:
         return "–" if value is None or not np.isfinite(value) else format(value, fmt)

@@ -1,5 +1,5 @@
 """Table 1's bootstrap with the structure scan rerun in every replicate (config.bootstrap_scan,
-pipeline._estimation_bootstrap): the selection's scatter enters the spread."""
+bootstrap.estimation_bootstrap): the selection's scatter enters the spread."""
 
 import dataclasses
 import json
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from aero_identification import pipeline
+from aero_identification import pnlss_training
 from aero_identification.config import IdentificationConfig
 from aero_identification.data import PeriodicData, random_phase_period
 from aero_identification.dataset import Dataset, LevelRecord, SineData
@@ -58,13 +58,13 @@ CONFIG = IdentificationConfig(
 def _spy(monkeypatch: Any) -> list[np.ndarray]:
     """Record the training outputs every structure scan gets."""
     seen: list[np.ndarray] = []
-    real = pipeline.scan_pnlss
+    real = pnlss_training.scan_pnlss
 
     def spy(data: PeriodicData, *args: Any, **kwargs: Any) -> Any:
         seen.append(data.y.copy())
         return real(data, *args, **kwargs)
 
-    monkeypatch.setattr(pipeline, "scan_pnlss", spy)
+    monkeypatch.setattr(pnlss_training, "scan_pnlss", spy)
     return seen
 
 

@@ -1,15 +1,16 @@
-"""The levels' weights in the all-levels PNLSS cost (config.level_weighting, pipeline.py)."""
+"""The levels' weights in the all-levels PNLSS cost (config.level_weighting, pnlss_training.py)."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from aero_identification import pipeline
+from aero_identification import pnlss_training
 from aero_identification.config import IdentificationConfig
 from aero_identification.data import PeriodicData, random_phase_period
 from aero_identification.dataset import Dataset, LevelRecord
-from aero_identification.pipeline import _set_weights, identify, noise_variance, pnlss_sets
+from aero_identification.pipeline import identify
+from aero_identification.pnlss_training import level_weights, noise_variance, pnlss_sets
 from aero_identification.results import LevelResult
 
 N, P, M = 64, 5, 3
@@ -37,7 +38,7 @@ def test_noise_weighting_follows_pnlss_sets_records() -> None:
     config = dataclasses.replace(IdentificationConfig(), level_weighting="noise")
     data, validation, _ = pnlss_sets(levels, config)
     assert validation is not None
-    train, held = _set_weights(levels, config, data, validation)
+    train, held = level_weights(levels, config, data, validation)
     assert train is not None and held is not None
     assert train.shape == (data.y.shape[2],) == (2 * (M - 1),)  # M - 1 training realizations
     assert held.shape == (validation.y.shape[2],) == (2,)
@@ -52,9 +53,9 @@ def test_other_weightings_unchanged() -> None:
     levels = [_level("low", 0.05, seed=4), _level("high", 0.5, seed=5)]
     base = IdentificationConfig()
     data, validation, _ = pnlss_sets(levels, base)
-    assert _set_weights(levels, base, data, validation) == (None, None)
+    assert level_weights(levels, base, data, validation) == (None, None)
     rel = dataclasses.replace(base, level_weighting="relative")
-    train, _ = _set_weights(levels, rel, data, validation)
+    train, _ = level_weights(levels, rel, data, validation)
     assert train is not None
     np.testing.assert_allclose(train, 1 / np.var(data.y, axis=0).T.reshape(-1))
 
@@ -102,7 +103,7 @@ def test_identify_passes_noise_weights_to_the_fit(
         seen.append(kwargs)
         raise ValueError("captured")  # the pipeline reports it and goes on
 
-    monkeypatch.setattr(pipeline, "scan_pnlss" if scan else "fit_pnlss", capture)
+    monkeypatch.setattr(pnlss_training, "scan_pnlss" if scan else "fit_pnlss", capture)
     config = dataclasses.replace(
         IdentificationConfig(), level_weighting="noise", scan=scan, clustering=False,
         clustering_ablation=False, scan_nx=(1,), scan_degrees=((2,),), max_iter=2,

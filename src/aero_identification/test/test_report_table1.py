@@ -164,7 +164,7 @@ class _Gain:
 
 
 def test_validation_fills_spreads_beside_errors_into_tables_and_json() -> None:
-    from aero_identification.pipeline import _validate_sine
+    from aero_identification.validation import validate_sine
 
     n, periods = 50, 4
     t = np.arange(n * periods)
@@ -178,7 +178,7 @@ def test_validation_fills_spreads_beside_errors_into_tables_and_json() -> None:
     result.levels["low"] = LevelResult(LevelRecord("low", None, key="1", offset_deg=10.0))
     result.pnlss_all = _Gain(0.1, 0.0)
     result.pnlss_level1 = _Gain(np.inf)  # diverged
-    _validate_sine(sine, result)
+    validate_sine(sine, result)
     y_hat = 0.1 * u
     key = ("PNLSS", "low", 1.0)
     assert result.errors_all[key] == relative_rms_error(y, y_hat)  # the value is unchanged

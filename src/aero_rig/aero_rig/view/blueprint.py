@@ -51,7 +51,7 @@ OLIVE = (188, 189, 34)
 CYAN = (23, 190, 207)
 CLUSTER_COLORS = [BLUE, ORANGE, GREEN, RED, PURPLE, BROWN, PINK]
 # The C_l–α view's series (model_message.prediction_series): the measured loop and the models
-# of pipeline._validate_sine; a model added later takes the first spare colour. A legend (points
+# of validation.validate_sine; a model added later takes the first spare colour. A legend (points
 # with the series' names) stands at the top left of the view, from LEGEND_AT down.
 PREDICTION_COLORS = ((mm.MEASURED, GRAY), *mm.MODEL_COLORS.items())  # the models' as the report's
 SPARE_COLORS = (PINK, OLIVE, CYAN, RED)
