@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from aero_identification import pipeline, pnlss_training
-from aero_identification.campaign import CampaignAssembler
 from aero_identification.campaign_dataset import campaign_dataset
 from aero_identification.config import IdentificationConfig
+from aero_identification.period_assembly import CampaignAssembler
 from aero_identification.results import IdentificationResult
 from aero_rig.simulation import T0_NS as T0
 from aero_rig.simulation import simulate_plan

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from .campaign import CampaignAssembler, PeriodBlock
 from .data import PeriodicData
 from .dataset import Dataset, LevelRecord, SineData
+from .period_assembly import CampaignAssembler, PeriodBlock
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
 

@@ -5,7 +5,7 @@ identifier_node.py is the rclpy shell around :class:`IdentificationSession`: it 
 parameters, subscribes the topics, hands the session each message's content, runs its timer,
 and publishes what the session gives it (:class:`SessionOutputs`). The parts:
 
-- :class:`Intake`: the plan's samples and anomalies, aligned into its periods (campaign.py),
+- :class:`Intake`: the plan's samples and anomalies, aligned into its periods (period_assembly.py),
   held while the plan is not there yet; holes in the plan index are named as they open.
 - :class:`RefitSchedule`: refits waiting for their data (:class:`PendingRefit`).
 - :class:`RefitWorker`: the worker process the refits run in, and its restart.
@@ -33,10 +33,10 @@ from rig_runtime.anomaly import Anomaly
 from rig_runtime.interface import EXPERIMENT_PLAN, PITCH_STATE, WING_COEFFICIENTS
 
 from . import adaptive, model_message, refit_worker
-from .campaign import CampaignAssembler
 from .campaign_dataset import level_so_far
 from .config import IdentificationConfig
 from .identifier_settings import IdentifierSettings
+from .period_assembly import CampaignAssembler
 from .quality import data_quality_lines
 
 RefitOutcome = tuple[dict[str, Any], dict[str, Any]]  # refit_worker.refit's (payload, summary)

@@ -2,7 +2,7 @@
 
 Subscribes ``/experiment/plan`` (latched; gives t0 and the segments), ``/pitch/state``
 (measured pitch -> input, degrees), ``/wing/coefficients`` (C_l -> output) and
-``/experiment/segment``. Samples are aligned by stamp into the plan's periods (campaign.py);
+``/experiment/segment``. Samples are aligned by stamp into the plan's periods (period_assembly.py);
 periods with gaps, duplicates or invalid samples are excluded and reported. After every
 completed multisine realization and every completed sine test it re-clusters and refits BLA,
 BLA state space and PNLSS (pipeline.py) in a worker process, so intake never stalls, and

@@ -17,8 +17,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .campaign import CampaignAssembler
 from .config import IdentificationConfig
+from .period_assembly import CampaignAssembler
 
 _kept: dict[str, Any] = {}  # "last": the latest IdentificationResult of this process
 

@@ -5,7 +5,7 @@ kept, and an older revision is refused."""
 import numpy as np
 import pytest
 
-from aero_identification.campaign import CampaignAssembler
+from aero_identification.period_assembly import CampaignAssembler
 from multisine_gen.campaigns import short_plan
 from multisine_gen.plan import ExperimentPlan
 from multisine_gen.revision import Adaptation, PlanRequest, revise

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from aero_identification import refit_worker
-from aero_identification.campaign import CampaignAssembler
 from aero_identification.campaign_dataset import level_so_far
 from aero_identification.identification_session import (
     MAX_LOGGED_GAPS,
@@ -24,6 +23,7 @@ from aero_identification.identification_session import (
     refit_after,
 )
 from aero_identification.identifier_settings import PARAMETERS, identifier_settings
+from aero_identification.period_assembly import CampaignAssembler
 from multisine_gen.campaigns import short_plan
 from multisine_gen.plan import ExperimentPlan
 from multisine_gen.plan_format import plan_message, segment_event

@@ -2,7 +2,7 @@
 
 Reads ``/experiment/plan``, ``/pitch/state`` and ``/wing/coefficients`` from a bag (MCAP or
 sqlite3, recorded by this graph's recorder or by ``ros2 bag record``), rebuilds the plan's
-periods from the stamps exactly as the node does (aero_identification.campaign) and runs the
+periods from the stamps exactly as the node does (aero_identification.period_assembly) and runs the
 final identification (aero_identification.pipeline). A damaged bag is read through a salvaged
 copy: every intact chunk, with a warning naming each gap (time span, messages lost per topic)
 and a file's damaged tail; a bag without the needed topics is refused, naming them. The
@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from aero_identification.campaign import CampaignAssembler
 from aero_identification.campaign_dataset import campaign_dataset
 from aero_identification.config import IdentificationConfig
+from aero_identification.period_assembly import CampaignAssembler
 from aero_identification.pipeline import identify
 from aero_identification.report import write_report
 from aero_identification.results import IdentificationResult

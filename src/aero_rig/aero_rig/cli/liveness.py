@@ -21,7 +21,7 @@ At the bound the wait ends, naming what stalled and on what (and any node proces
 stopped). The bound comes from the graph's own clocks, not a guess: the DDS participant lease
 (ros_environment.PARTICIPANT_LEASE_S) plus two status periods. It also covers the generator's
 longest legitimate stand-still, the adaptive hold at a period's end, which the lease bounds
-(generator_node.py). The campaign then recovers the identification from the bag (campaign.py).
+(generator_node.py). The campaign then recovers the identification from the bag (recovery.py).
 """
 
 from dataclasses import dataclass, field
