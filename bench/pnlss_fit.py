@@ -77,7 +77,7 @@ def main() -> None:
     from aero_identification.data import PeriodicData
     from aero_identification.metrics import relative_rms_error
     from aero_identification.models import STATE_BOUND
-    from aero_identification.pnlss import _Layout, fit_pnlss
+    from aero_identification.pnlss import PnlssSettings, _Layout, fit_pnlss
     from aero_identification.pnlss_kernels import jacobian_records, simulate_records
     from aero_identification.subspace import fit_linear_ss
 
@@ -107,15 +107,16 @@ def main() -> None:
 
     # numba: first calls compile (or load from the on-disk cache); timed apart from the fit.
     t0 = time.perf_counter()
-    fit_pnlss(data.select_realizations([0]).drop_leading(P_TRAIN - 1), lin, (2, 3), max_iter=1)
+    tiny = data.select_realizations([0]).drop_leading(P_TRAIN - 1)
+    fit_pnlss(tiny, lin, PnlssSettings(degrees=(2, 3), max_iter=1))
     compile_s = time.perf_counter() - t0
     cold = "--cold" in sys.argv
     print(f"numba {'cold compile' if cold else 'compile or cache load'} + tiny fit: "
           f"{compile_s:.2f} s")  # fmt: skip
 
     t0 = time.perf_counter()
-    model = fit_pnlss(data, lin, degrees=(2, 3), structure="full", max_iter=MAX_ITER,
-                      validation=(u_val, y_val))  # fmt: skip
+    settings = PnlssSettings(degrees=(2, 3), structure="full", max_iter=MAX_ITER)
+    model = fit_pnlss(data, lin, settings, validation=(u_val, y_val))
     fit_s = time.perf_counter() - t0
     accepted = sum(r.accepted for r in model.history_[1:])
     trials = len(model.history_) - 1
@@ -155,7 +156,7 @@ def main() -> None:
     # Peak memory: numpy/Python allocations of a short fit (the peak is reached at the first
     # Jacobian + QR), and the process's peak resident size.
     tracemalloc.start()
-    fit_pnlss(data, lin, degrees=(2, 3), max_iter=3, validation=(u_val, y_val))
+    fit_pnlss(data, lin, PnlssSettings(degrees=(2, 3), max_iter=3), validation=(u_val, y_val))
     peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -15,9 +15,9 @@ Every case is fitted in fresh processes that differ only in their environment:
 Cases:
 
 - ``duffing``: a Duffing oscillator (bench/pnlss_fit.py's system and multisine), the call of
-  issue 22: ``fit_pnlss(data, lin, degrees=(2, 3), structure="full", max_iter=50,
-  validation=...)`` at nx = 2; validation on another realization, test on a third realization
-  at 1.4× the amplitude (extrapolation);
+  issue 22: ``fit_pnlss(data, lin, PnlssSettings(degrees=(2, 3), structure="full",
+  max_iter=50), validation=...)`` at nx = 2; validation on another realization, test on a
+  third realization at 1.4× the amplitude (extrapolation);
 - ``f16``: the F-16 GVT benchmark (``$F16_GVT_DIR``, see docs/real_data.md): nx = 6, statesonly
   degree 3, 20 iterations, trained on levels 1, 3, 5, 7; errors on levels 2, 4, 6;
 - ``bag``: ``aero-rig fit BAG`` on a campaign's bag (``--bag``); Table 1's PNLSS cells.
@@ -52,7 +52,7 @@ def duffing_case() -> dict[str, float]:
     from aero_identification.bla import estimate_bla
     from aero_identification.data import PeriodicData
     from aero_identification.metrics import relative_rms_error
-    from aero_identification.pnlss import fit_pnlss
+    from aero_identification.pnlss import PnlssSettings, fit_pnlss
     from aero_identification.subspace import fit_linear_ss
 
     rng = np.random.default_rng(2024)
@@ -74,8 +74,8 @@ def duffing_case() -> dict[str, float]:
     y_test = y_test + noise * rng.standard_normal(y_test.size)
     lin = fit_linear_ss(estimate_bla(data), nx=2).with_operating_point(u.mean(), y.mean())
     t0 = time.perf_counter()
-    model = fit_pnlss(data, lin, degrees=(2, 3), structure="full", max_iter=50,
-                      validation=(u_val, y_val))  # fmt: skip
+    settings = PnlssSettings(degrees=(2, 3), structure="full", max_iter=50)
+    model = fit_pnlss(data, lin, settings, validation=(u_val, y_val))
     seconds = time.perf_counter() - t0
     return {
         "validation": relative_rms_error(y_val[N:], model.simulate(u_val)[N:]),

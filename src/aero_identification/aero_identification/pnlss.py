@@ -28,15 +28,19 @@ Fit (Paduart 2010; the PNLSS toolbox's weighted Levenberg–Marquardt):
 
 import contextlib
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
 
 from aero_identification.data import PeriodicData
 from aero_identification.models import STATE_BOUND, LinearStateSpace, LMIteration, PNLSSModel
-from aero_identification.monomials import STRUCTURES, check_degrees, structure_exponents
+from aero_identification.monomials import (
+    STRUCTURES,
+    check_degrees,
+    evaluate_monomials,
+    structure_exponents,
+)
 from aero_identification.pnlss_kernels import jacobian_records, simulate_records
 
 # Where the monomials enter (Paduart et al. 2010, eq. 2): the state equation only (E), or the
@@ -308,62 +312,31 @@ def _initial_from_linear(
     }
 
 
-def fit_pnlss(
-    data: PeriodicData,
-    lin: LinearStateSpace,
-    degrees: Sequence[int] = (2, 3),
-    structure: str = "full",
-    max_iter: int = 100,
-    validation: tuple[np.ndarray, np.ndarray] | PeriodicData | None = None,
-    *,
-    n_transient: int | None = None,
-    weighting: str | np.ndarray | None = None,
-    fit_offset: bool = True,
-    lambda_init: float = 1.0,
-    initial_model: PNLSSModel | None = None,
-    solver: str = "normal",
-    equations: str = "state+output",
-    record_weights: np.ndarray | None = None,
-    validation_weights: np.ndarray | None = None,
-    stress: float | None = None,
-) -> PNLSSModel:
-    """Fit a PNLSS model to periodic data by Levenberg–Marquardt (module docstring).
+@dataclass(frozen=True)
+class PnlssSettings:
+    """The hyperparameters of a PNLSS fit: the method's choices, apart from the data it fits.
 
-    Args:
-        data: PeriodicData with u, y of shape (N, P, M); every period is a training record.
-        lin: the initial linear model (A, B, C, D are used; its operating point is replaced by
-            the training-data means).
-        degrees: total degrees of the monomials (each >= 2), e.g. (2, 3).
+    Attributes:
+        degrees: total degrees of the monomials (each >= 2), e.g. (2, 3); stored sorted and
+            without repeats (monomials.check_degrees).
         structure: "full", "statesonly" or "inputsonly" (monomials.py).
+        equations: where the monomials enter: "state" (E only: x(t+1) = Ax + Bu + Eζ,
+            y = Cx + Du, the PNLSS toolbox's default structure) or "state+output" (E and F:
+            also y = Cx + Du + Fη).
         max_iter: number of LM trials (accepted or rejected).
-        validation: (u_val, y_val), 1-D records of equal length in absolute units, whose
-            first min(n_transient, length // 2) samples are left out of the validation error
-            (the simulation starts at the operating point); or PeriodicData of held-out periods
-            (same N), each simulated in steady state like the training records. Used for the
-            divergence guard and to choose the returned model.
-        n_transient: samples prepended to each record; default: the decay time of the slowest
+        n_transient: samples prepended to each record; None: the decay time of the slowest
             linear mode to 1e-4 (at most one period).
         weighting: None (time-domain cost), "noise" (1/σ²_Y(k) per DFT bin, from the periods;
-            needs P >= 2) or an explicit (N//2+1,) array of non-negative per-bin weights.
+            needs P >= 2) or an explicit (N//2+1,) array of non-negative per-bin weights
+            (settings holding an array do not compare or hash).
         fit_offset: estimate the output offset (the model output at the operating point).
         lambda_init: initial damping relative to the largest singular value of the normalised
             Jacobian (1 = PNLSS toolbox default; a tiny value makes the first steps Gauss–Newton).
-        initial_model: start from this PNLSS model instead of `lin` (its normalisation,
-            degrees and structure are kept; `lin` is then only used for n_transient).
         solver: how the SVD of the normalised Jacobian is obtained (`lm_directions`):
             "normal" (eigendecomposition of JᵀJ; about 5× cheaper than "qr" on long records,
             singular values below ~1e-5·s_max are dropped) or "qr" (Householder QR in place,
             then SVD of R; backward stable). On the Duffing benchmark both give the same fit
             to 12 digits.
-        equations: where the monomials enter: "state" (E only: x(t+1) = Ax + Bu + Eζ,
-            y = Cx + Du, the PNLSS toolbox's default structure) or "state+output" (E and F:
-            also y = Cx + Du + Fη). Ignored with `initial_model` (its terms are kept).
-        record_weights: one non-negative weight per training record (record r = m·P + p, as
-            the periods of data): the cost is Σ_r w_r ||e_r||², so records measured on
-            different scales (e.g. levels of one campaign) can count by their relative error.
-            None: every record weighs 1.
-        validation_weights: the same for the PeriodicData validation records (R_val = P·M of
-            `validation`), so the returned iterate is chosen by the same criterion.
         stress: with validation, also simulate the validation inputs scaled about their mean by
             this factor (e.g. 1.3), and for periodic validation data two random-phase periods of
             the same amplitude spectrum per record (`stress_periods`): a trial step whose
@@ -371,6 +344,78 @@ def fit_pnlss(
             diverges on the data, so the returned model stays bounded beyond the validated
             amplitudes (issue 22: every F-16 candidate fitted on levels 1-5 diverged at level 7,
             1.33× level 5). None: no such check.
+
+    A fit from an `initial_model` keeps that model's degrees, structure and terms (degrees,
+    structure and equations are then not used).
+
+    Raises:
+        ValueError: for a value the fit cannot use (the checks that need the data, such as the
+            length of a weighting array, are the fit's).
+    """
+
+    degrees: tuple[int, ...] = (2, 3)
+    structure: str = "full"
+    equations: str = "state+output"
+    max_iter: int = 100
+    n_transient: int | None = None
+    weighting: str | np.ndarray | None = None
+    fit_offset: bool = True
+    lambda_init: float = 1.0
+    solver: str = "normal"
+    stress: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.max_iter < 0:
+            raise ValueError(f"max_iter must be >= 0; got {self.max_iter}")
+        if self.solver not in ("qr", "normal"):
+            raise ValueError(f"unknown solver {self.solver!r}; use 'qr' or 'normal'")
+        if self.equations not in EQUATIONS:
+            raise ValueError(f"unknown equations {self.equations!r}; choose one of {EQUATIONS}")
+        if self.structure not in STRUCTURES:
+            raise ValueError(
+                f"unknown PNLSS structure {self.structure!r}; choose one of {STRUCTURES}"
+            )
+        object.__setattr__(self, "degrees", check_degrees(self.degrees))
+        if self.n_transient is not None and int(self.n_transient) < 0:
+            raise ValueError(f"n_transient must be >= 0; got {int(self.n_transient)}")
+        stress = self.stress
+        if stress is not None and not (math.isfinite(stress) and stress > 0):
+            raise ValueError(f"stress needs validation data and a positive factor; got {stress}")
+        if isinstance(self.weighting, str) and self.weighting != "noise":
+            raise ValueError(f"unknown weighting {self.weighting!r}; use None, 'noise' or an array")
+
+
+def fit_pnlss(
+    data: PeriodicData,
+    lin: LinearStateSpace,
+    settings: PnlssSettings = PnlssSettings(),
+    *,
+    validation: tuple[np.ndarray, np.ndarray] | PeriodicData | None = None,
+    initial_model: PNLSSModel | None = None,
+    record_weights: np.ndarray | None = None,
+    validation_weights: np.ndarray | None = None,
+) -> PNLSSModel:
+    """Fit a PNLSS model to periodic data by Levenberg–Marquardt (module docstring).
+
+    Args:
+        data: PeriodicData with u, y of shape (N, P, M); every period is a training record.
+        lin: the initial linear model (A, B, C, D are used; its operating point is replaced by
+            the training-data means).
+        settings: the fit's hyperparameters (PnlssSettings).
+        validation: (u_val, y_val), 1-D records of equal length in absolute units, whose
+            first min(n_transient, length // 2) samples are left out of the validation error
+            (the simulation starts at the operating point); or PeriodicData of held-out periods
+            (same N), each simulated in steady state like the training records. Used for the
+            divergence guard and to choose the returned model.
+        initial_model: start from this PNLSS model instead of `lin` (its normalisation,
+            degrees, structure and terms are kept, not the settings'; `lin` is then only used
+            for n_transient).
+        record_weights: one non-negative weight per training record (record r = m·P + p, as
+            the periods of data): the cost is Σ_r w_r ||e_r||², so records measured on
+            different scales (e.g. levels of one campaign) can count by their relative error.
+            None: every record weighs 1.
+        validation_weights: the same for the PeriodicData validation records (R_val = P·M of
+            `validation`), so the returned iterate is chosen by the same criterion.
 
     Returns:
         The PNLSSModel with `history_`, `cost_`, `cost_val_`.
@@ -380,12 +425,6 @@ def fit_pnlss(
     """
     if not isinstance(data, PeriodicData):
         raise TypeError(f"data must be a PeriodicData (N, P, M) record; got {type(data).__name__}")
-    if max_iter < 0:
-        raise ValueError(f"max_iter must be >= 0; got {max_iter}")
-    if solver not in ("qr", "normal"):
-        raise ValueError(f"unknown solver {solver!r}; use 'qr' or 'normal'")
-    if equations not in EQUATIONS:
-        raise ValueError(f"unknown equations {equations!r}; choose one of {EQUATIONS}")
     if lin.nu != 1 or lin.ny != 1:
         raise ValueError(
             f"PeriodicData is SISO but the linear model has nu={lin.nu}, ny={lin.ny}; fit a "
@@ -395,80 +434,124 @@ def fit_pnlss(
     R = P * M
     sqrt_rw = _record_weights(record_weights, R, "record_weights")
     nx = lin.nx if initial_model is None else initial_model.nx
-    nu = ny = 1
-
-    # Normalisation and monomials.
-    if initial_model is not None:
-        u_mean, u_scale = initial_model.u_mean, initial_model.u_scale
-        y_mean, y_scale = initial_model.y_mean, initial_model.y_scale
-        exp_state, exp_output = initial_model.exponents_state, initial_model.exponents_output
-        degrees_t, structure = initial_model.degrees, initial_model.structure
-    else:
-        if structure not in STRUCTURES:
-            raise ValueError(f"unknown PNLSS structure {structure!r}; choose one of {STRUCTURES}")
-        degrees_t = check_degrees(degrees)
-        # Record weights weigh the normalisation statistics too: a record that does not count
-        # in the cost does not move the model's coordinates either.
-        u_mean, u_scale = _weighted_stats(data.u, record_weights)
-        y_mean, y_scale = _weighted_stats(data.y, record_weights)
-        if not (u_scale[0] > 0 and y_scale[0] > 0):
-            raise ValueError(
-                "training input or output is constant (zero standard deviation); an "
-                "excited record is needed to fit a PNLSS model"
-            )
-        exp_state = structure_exponents(nx, nu, degrees_t, structure)
-        exp_output = exp_state.copy() if equations == "state+output" else exp_state[:0].copy()
-    Kz, Ke = exp_state.shape[0], exp_output.shape[0]
+    frame = _frame(data, nx, settings, initial_model, record_weights)
 
     # Records: each period, with the tail of its own input prepended (periodic steady state).
-    nt = default_transient(lin.A, N) if n_transient is None else int(n_transient)
-    if nt < 0:
-        raise ValueError(f"n_transient must be >= 0; got {nt}")
-    u_rec = periodic_records((data.u - u_mean[0]) / u_scale[0], nt)
-    y_per = ((data.y - y_mean[0]) / y_scale[0]).transpose(2, 1, 0).reshape(R, N)
+    nt = default_transient(lin.A, N) if settings.n_transient is None else int(settings.n_transient)
+    u_rec = periodic_records((data.u - frame.u_mean[0]) / frame.u_scale[0], nt)
+    y_per = ((data.y - frame.y_mean[0]) / frame.y_scale[0]).transpose(2, 1, 0).reshape(R, N)
     y_rec = np.ascontiguousarray(y_per[:, :, None])
     x0_rec = np.zeros((R, nx))
+    held = _held_out(validation, frame, N, nt, settings.stress, validation_weights)
+    sqrt_w = _bin_weights(settings.weighting, data, frame)
 
-    # Validation records: periodic (each period in steady state, like the training records)
-    # or one 1-D record simulated from the operating point.
-    if isinstance(validation, PeriodicData):
-        if validation.u.shape[0] != N:
-            raise ValueError(
-                f"validation periods have {validation.u.shape[0]} samples; training periods "
-                f"have {N}"
-            )
-        nt_val = nt
-        u_val_n = periodic_records((validation.u - u_mean[0]) / u_scale[0], nt)
-        y_val_tail = validation.y.transpose(2, 1, 0).reshape(-1, N)
-    elif validation is not None:
-        u_val, y_val = (np.asarray(v, dtype=float).reshape(-1) for v in validation)
-        if u_val.shape != y_val.shape:
-            raise ValueError(
-                f"validation u and y must have the same length; got {u_val.size}, {y_val.size}"
-            )
-        if u_val.size < 4 or not (np.all(np.isfinite(u_val)) and np.all(np.isfinite(y_val))):
-            raise ValueError(
-                f"the validation record must be finite with at least 4 samples; got "
-                f"{u_val.size} samples"
-            )
-        nt_val = min(nt, u_val.size // 2)
-        u_val_n = np.ascontiguousarray(((u_val - u_mean[0]) / u_scale[0])[None, :, None])
-        y_val_tail = y_val[None, nt_val:]
+    Kz, Ke = frame.exp_state.shape[0], frame.exp_output.shape[0]
+    layout = _Layout(nx, 1, 1, Kz, Ke, settings.fit_offset)
+    theta = _start_parameters(lin, initial_model, layout, frame, u_rec, sqrt_rw)
+    n_rows = R * N * layout.ny
+    if n_rows <= layout.n_par:
+        raise ValueError(f"{n_rows} samples are too few for {layout.n_par} parameters")
+    problem = _Problem(layout, frame, nt, u_rec, y_rec, x0_rec, sqrt_rw, sqrt_w, held)
+    best, history = _levenberg_marquardt(problem, theta, settings)
+
+    _, theta_best, cost_best, cost_val_best = best
+    m = layout.unpack(theta_best)
+    return PNLSSModel(
+        A=m["A"], B=m["B"], C=m["C"], D=m["D"], E=m["E"], F=m["F"],
+        exponents_state=frame.exp_state, exponents_output=frame.exp_output,
+        u_mean=frame.u_mean, u_scale=frame.u_scale,
+        y_mean=frame.y_mean + frame.y_scale * m["offset"][:, 0], y_scale=frame.y_scale,
+        fs=data.fs, degrees=frame.degrees, structure=frame.structure, n_transient=nt,
+        history_=history, cost_=cost_best, cost_val_=cost_val_best,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """The model's coordinates and terms: normalisation (nu = ny = 1), monomial exponents,
+    degrees and structure."""
+
+    u_mean: np.ndarray
+    u_scale: np.ndarray
+    y_mean: np.ndarray
+    y_scale: np.ndarray
+    exp_state: np.ndarray
+    exp_output: np.ndarray
+    degrees: tuple[int, ...]
+    structure: str
+
+
+def _frame(
+    data: PeriodicData,
+    nx: int,
+    settings: PnlssSettings,
+    initial_model: PNLSSModel | None,
+    record_weights: np.ndarray | None,
+) -> _Frame:
+    """The initial model's frame, or a new one from the training data and the settings."""
+    if initial_model is not None:
+        m = initial_model
+        return _Frame(
+            m.u_mean, m.u_scale, m.y_mean, m.y_scale, m.exponents_state, m.exponents_output,
+            m.degrees, m.structure,
+        )  # fmt: skip
+    # Record weights weigh the normalisation statistics too: a record that does not count
+    # in the cost does not move the model's coordinates either.
+    u_mean, u_scale = _weighted_stats(data.u, record_weights)
+    y_mean, y_scale = _weighted_stats(data.y, record_weights)
+    if not (u_scale[0] > 0 and y_scale[0] > 0):
+        raise ValueError(
+            "training input or output is constant (zero standard deviation); an "
+            "excited record is needed to fit a PNLSS model"
+        )
+    exp_state = structure_exponents(nx, 1, settings.degrees, settings.structure)
+    exp_output = exp_state.copy() if settings.equations == "state+output" else exp_state[:0].copy()
+    return _Frame(
+        u_mean, u_scale, y_mean, y_scale, exp_state, exp_output, settings.degrees,
+        settings.structure,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _HeldOut:
+    """Validation records: normalised inputs (R_val, nt + T, 1), the absolute outputs compared
+    (R_val, T - nt), the samples left out, the stressed inputs and √(record weights)."""
+
+    u: np.ndarray
+    y_tail: np.ndarray
+    nt: int
+    u_stress: np.ndarray | None
+    sqrt_w: np.ndarray | None
+
+
+def _held_out(
+    validation: tuple[np.ndarray, np.ndarray] | PeriodicData | None,
+    frame: _Frame,
+    N: int,
+    nt: int,
+    stress: float | None,
+    validation_weights: np.ndarray | None,
+) -> _HeldOut | None:
+    """The validation records in the fit's coordinates (None without validation), checked."""
+    if validation is None:
+        if stress is not None:
+            raise ValueError(f"stress needs validation data and a positive factor; got {stress}")
+        if validation_weights is not None:
+            raise ValueError("validation_weights need a PeriodicData validation set")
+        return None
+    u_val_n, y_val_tail, nt_val = _validation_records(validation, frame, N, nt)
 
     # Stressed validation inputs: the same records scaled about their own mean.
     u_stress_n: np.ndarray | None = None
     if stress is not None:
-        if validation is None or not (math.isfinite(stress) and stress > 0):
-            raise ValueError(f"stress needs validation data and a positive factor; got {stress}")
         if isinstance(validation, PeriodicData):
             periods = validation.u.transpose(2, 1, 0).reshape(-1, N).T  # (N, R_val)
-            stressed = (stress_periods(periods, float(stress)) - u_mean[0]) / u_scale[0]
+            stressed = (stress_periods(periods, float(stress)) - frame.u_mean[0]) / frame.u_scale[0]
             u_stress_n = periodic_records(stressed[:, None, :], nt)
         else:
             centre = np.mean(u_val_n, axis=1, keepdims=True)
             u_stress_n = np.ascontiguousarray(centre + float(stress) * (u_val_n - centre))
 
-    # Weighting: per record, then (optionally) per DFT bin.
     sqrt_vw: np.ndarray | None = None
     if validation_weights is not None:
         if not isinstance(validation, PeriodicData):
@@ -476,109 +559,193 @@ def fit_pnlss(
         sqrt_vw = _record_weights(
             validation_weights, validation.u.shape[1] * validation.u.shape[2], "validation_weights"
         )
-    sqrt_w: np.ndarray | None = None
-    if isinstance(weighting, str):
-        if weighting != "noise":
-            raise ValueError(f"unknown weighting {weighting!r}; use None, 'noise' or an array")
-        w = _noise_weights((data.y - y_mean[0]) / y_scale[0])
-    elif weighting is not None:
+    return _HeldOut(u_val_n, y_val_tail, nt_val, u_stress_n, sqrt_vw)
+
+
+def _validation_records(
+    validation: tuple[np.ndarray, np.ndarray] | PeriodicData, frame: _Frame, N: int, nt: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Periodic validation (each period in steady state, like the training records) or one 1-D
+    record simulated from the operating point -> (normalised inputs, outputs compared, nt)."""
+    if isinstance(validation, PeriodicData):
+        if validation.u.shape[0] != N:
+            raise ValueError(
+                f"validation periods have {validation.u.shape[0]} samples; training periods "
+                f"have {N}"
+            )
+        u_val_n = periodic_records((validation.u - frame.u_mean[0]) / frame.u_scale[0], nt)
+        return u_val_n, validation.y.transpose(2, 1, 0).reshape(-1, N), nt
+    u_val, y_val = (np.asarray(v, dtype=float).reshape(-1) for v in validation)
+    if u_val.shape != y_val.shape:
+        raise ValueError(
+            f"validation u and y must have the same length; got {u_val.size}, {y_val.size}"
+        )
+    if u_val.size < 4 or not (np.all(np.isfinite(u_val)) and np.all(np.isfinite(y_val))):
+        raise ValueError(
+            f"the validation record must be finite with at least 4 samples; got "
+            f"{u_val.size} samples"
+        )
+    nt_val = min(nt, u_val.size // 2)
+    u_val_n = np.ascontiguousarray(((u_val - frame.u_mean[0]) / frame.u_scale[0])[None, :, None])
+    return u_val_n, y_val[None, nt_val:], nt_val
+
+
+def _bin_weights(
+    weighting: str | np.ndarray | None, data: PeriodicData, frame: _Frame
+) -> np.ndarray | None:
+    """√ of the normalised per-DFT-bin weights (N//2+1, 1), or None for the time-domain cost."""
+    if weighting is None:
+        return None
+    N = data.u.shape[0]
+    if isinstance(weighting, str):  # "noise" (PnlssSettings checks the name)
+        w = _noise_weights((data.y - frame.y_mean[0]) / frame.y_scale[0])
+    else:
         w = np.asarray(weighting, dtype=float).reshape(-1, 1)
         if w.shape[0] != N // 2 + 1 or np.any(w < 0) or not np.all(np.isfinite(w)):
             raise ValueError(
                 f"weighting must be N//2+1={N // 2 + 1} finite non-negative per-bin weights; "
                 f"got shape {np.shape(weighting)}"
             )
-    if weighting is not None:
-        sqrt_w = np.sqrt(_normalise_weights(w, N))
+    return np.sqrt(_normalise_weights(w, N))
 
-    layout = _Layout(nx, nu, ny, Kz, Ke, fit_offset)
+
+def _start_parameters(
+    lin: LinearStateSpace,
+    initial_model: PNLSSModel | None,
+    layout: _Layout,
+    frame: _Frame,
+    u_rec: np.ndarray,
+    sqrt_rw: np.ndarray | None,
+) -> np.ndarray:
+    """The starting parameter vector: the initial model's, or the linear model's with E = F = 0;
+    the offset starts at 0."""
     if initial_model is not None:
         mats = {k: getattr(initial_model, k) for k in "ABCDEF"}
     else:
         mats = _initial_from_linear(
-            lin, u_rec, u_scale, y_scale, None if sqrt_rw is None else sqrt_rw**2
+            lin, u_rec, frame.u_scale, frame.y_scale, None if sqrt_rw is None else sqrt_rw**2
         )
-        mats["E"] = np.zeros((nx, Kz))
-        mats["F"] = np.zeros((ny, Ke))
-    mats["offset"] = np.zeros((ny, 1))
-    theta = layout.pack(mats)
-    n_par = layout.n_par
-    n_rows = R * N * ny
-    if n_rows <= n_par:
-        raise ValueError(f"{n_rows} samples are too few for {n_par} parameters")
+        mats["E"] = np.zeros((layout.nx, layout.Kz))
+        mats["F"] = np.zeros((layout.ny, layout.Ke))
+    mats["offset"] = np.zeros((layout.ny, 1))
+    return layout.pack(mats)
 
-    def simulate(th: np.ndarray, u: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        m = layout.unpack(th)
+
+@dataclass(frozen=True)
+class _Problem:
+    """The least-squares problem: training records (R, nt + N, 1) -> (R, N, 1) in normalised
+    units, their weights, the validation records; the costs and Jacobian of a parameter vector."""
+
+    layout: _Layout
+    frame: _Frame
+    nt: int
+    u_rec: np.ndarray
+    y_rec: np.ndarray
+    x0_rec: np.ndarray
+    sqrt_rw: np.ndarray | None
+    sqrt_w: np.ndarray | None
+    held: _HeldOut | None
+
+    def simulate(self, th: np.ndarray, u: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        m = self.layout.unpack(th)
         y = simulate_records(
-            m["A"], m["B"], m["C"], m["D"], m["E"], m["F"], exp_state, exp_output, u, x0,
-            STATE_BOUND,
+            m["A"], m["B"], m["C"], m["D"], m["E"], m["F"], self.frame.exp_state,
+            self.frame.exp_output, u, x0, STATE_BOUND,
         )  # fmt: skip
         return y + m["offset"][:, 0]
 
-    def residual(y_sim: np.ndarray) -> np.ndarray:
-        e = y_sim[:, nt:, :] - y_rec
-        if sqrt_rw is not None:
-            e = e * sqrt_rw[:, None, None]
-        return e if sqrt_w is None else _pack_spectrum(e, sqrt_w)
+    def residual(self, y_sim: np.ndarray) -> np.ndarray:
+        e = y_sim[:, self.nt :, :] - self.y_rec
+        if self.sqrt_rw is not None:
+            e = e * self.sqrt_rw[:, None, None]
+        return e if self.sqrt_w is None else _pack_spectrum(e, self.sqrt_w)
 
-    def train_cost(th: np.ndarray) -> float:
-        e = residual(simulate(th, u_rec, x0_rec))
+    def train_cost(self, th: np.ndarray) -> float:
+        e = self.residual(self.simulate(th, self.u_rec, self.x0_rec))
         c = float(np.mean(e * e))
         return c if math.isfinite(c) else math.inf
 
-    def val_cost(th: np.ndarray) -> float:
-        if validation is None:
+    def val_cost(self, th: np.ndarray) -> float:
+        """Validation mean squared error [output units²]; nan without validation, inf if the
+        validation (or stressed) simulation diverges."""
+        held = self.held
+        if held is None:
             return math.nan
-        x0 = np.zeros((u_val_n.shape[0], nx))
-        if u_stress_n is not None:
-            x0s = np.zeros((u_stress_n.shape[0], nx))
-            if not np.all(np.isfinite(simulate(th, u_stress_n, x0s))):
+        nx = self.layout.nx
+        x0 = np.zeros((held.u.shape[0], nx))
+        if held.u_stress is not None:
+            x0s = np.zeros((held.u_stress.shape[0], nx))
+            if not np.all(np.isfinite(self.simulate(th, held.u_stress, x0s))):
                 return math.inf  # diverges at the stressed amplitude
-        y = y_mean[0] + y_scale[0] * simulate(th, u_val_n, x0)[:, nt_val:, 0]
-        e2 = (y - y_val_tail) ** 2
-        c = float(np.mean(e2 if sqrt_vw is None else e2 * (sqrt_vw**2)[:, None]))
+        y_mean, y_scale = self.frame.y_mean, self.frame.y_scale
+        y = y_mean[0] + y_scale[0] * self.simulate(th, held.u, x0)[:, held.nt :, 0]
+        e2 = (y - held.y_tail) ** 2
+        c = float(np.mean(e2 if held.sqrt_w is None else e2 * (held.sqrt_w**2)[:, None]))
         return c if math.isfinite(c) else math.inf
 
-    cost = train_cost(theta)
-    cost_val = val_cost(theta)
+    def directions(
+        self, theta: np.ndarray, J: np.ndarray, solver: str
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The weighted Jacobian [J | e] at theta, written into J, and its `lm_directions`."""
+        layout, frame = self.layout, self.frame
+        m = layout.unpack(theta)
+        ok = jacobian_records(
+            m["A"], m["B"], m["C"], m["D"], m["E"], m["F"], frame.exp_state, frame.exp_output,
+            self.u_rec, self.y_rec, self.nt, m["offset"][:, 0].copy(), layout.fit_offset,
+            STATE_BOUND, J,
+        )  # fmt: skip
+        if not np.all(ok):
+            raise RuntimeError("internal error: an accepted model diverged in the Jacobian")
+        R, N, ny = self.y_rec.shape
+        if self.sqrt_rw is not None:  # rows are record-major: record r's N·ny rows
+            J *= np.repeat(self.sqrt_rw, N * ny)[:, None]
+        if self.sqrt_w is not None:
+            _pack_columns_in_place(J, R, N, ny, self.sqrt_w)
+        return lm_directions(J, layout.n_par, layout.n_par - layout.nx * layout.nx, solver)
+
+
+_Iterate = tuple[float, np.ndarray, float, float]  # (criterion, theta, cost, cost_val)
+
+
+def _levenberg_marquardt(
+    problem: _Problem, theta: np.ndarray, settings: PnlssSettings
+) -> tuple[_Iterate, list[LMIteration]]:
+    """The LM trials from theta -> (the iterate kept, the history).
+
+    A trial is accepted if it lowers the training cost and (with validation) its validation
+    simulation stays finite; the iterate kept is the best on the validation records (the
+    start included), or the last accepted one without validation.
+    """
+    validated = problem.held is not None
+    cost = problem.train_cost(theta)
+    cost_val = problem.val_cost(theta)
     if not math.isfinite(cost):
         raise ValueError("the initial model diverges on the training data; check lin and data")
     history = [LMIteration(0, cost, cost_val, math.nan, True)]
-    best = (cost_val if validation is not None else cost, theta, cost, cost_val)
+    best: _Iterate = (cost_val if validated else cost, theta, cost, cost_val)
 
     # One Jacobian buffer [J | e], Fortran order so the QR works in place (memory: n_rows ×
     # (n_par + 1) float64, once).
-    J = np.empty((n_rows, n_par + 1), order="F") if max_iter > 0 else np.empty((0, 0))
-    lam_rel = float(lambda_init)
+    n_rows, n_par = problem.y_rec.size, problem.layout.n_par
+    J = np.empty((n_rows, n_par + 1), order="F") if settings.max_iter > 0 else np.empty((0, 0))
+    lam_rel = float(settings.lambda_init)
     need_jacobian = True
-    rank_cap = n_par - nx * nx
     V = s = g = col_norm = np.empty(0)
     with one_blas_thread():
-        for it in range(1, max_iter + 1):
+        for it in range(1, settings.max_iter + 1):
             if need_jacobian:
-                m = layout.unpack(theta)
-                ok = jacobian_records(
-                    m["A"], m["B"], m["C"], m["D"], m["E"], m["F"], exp_state, exp_output, u_rec,
-                    y_rec, nt, m["offset"][:, 0].copy(), fit_offset, STATE_BOUND, J,
-                )  # fmt: skip
-                if not np.all(ok):
-                    raise RuntimeError("internal error: an accepted model diverged in the Jacobian")
-                if sqrt_rw is not None:  # rows are record-major: record r's N·ny rows
-                    J *= np.repeat(sqrt_rw, N * ny)[:, None]
-                if sqrt_w is not None:
-                    _pack_columns_in_place(J, R, N, ny, sqrt_w)
-                V, s, g, col_norm = lm_directions(J, n_par, rank_cap, solver)
+                V, s, g, col_norm = problem.directions(theta, J, settings.solver)
                 need_jacobian = False
             lam = lam_rel * s[0]
             step = -(V @ (s / (s * s + lam * lam) * g)) / col_norm
             trial = theta + step
-            c_tr = train_cost(trial)
-            cv_tr = val_cost(trial)
-            accepted = c_tr < cost and (validation is None or math.isfinite(cv_tr))
+            c_tr = problem.train_cost(trial)
+            cv_tr = problem.val_cost(trial)
+            accepted = c_tr < cost and (not validated or math.isfinite(cv_tr))
             history.append(LMIteration(it, c_tr, cv_tr, lam_rel, accepted))
             if accepted:
                 theta, cost, cost_val = trial, c_tr, cv_tr
-                crit = cost_val if validation is not None else cost
+                crit = cost_val if validated else cost
                 if crit <= best[0]:
                     best = (crit, theta, cost, cost_val)
                 lam_rel /= 2.0  # PNLSS toolbox schedule: halve on success, ×√10 on failure
@@ -587,26 +754,15 @@ def fit_pnlss(
                 lam_rel *= math.sqrt(10.0)
                 if lam_rel > 1e12:  # every direction damped away: no further progress possible
                     break
-
-    _, theta_best, cost_best, cost_val_best = best
-    m = layout.unpack(theta_best)
-    return PNLSSModel(
-        A=m["A"], B=m["B"], C=m["C"], D=m["D"], E=m["E"], F=m["F"],
-        exponents_state=exp_state, exponents_output=exp_output, u_mean=u_mean, u_scale=u_scale,
-        y_mean=y_mean + y_scale * m["offset"][:, 0], y_scale=y_scale, fs=data.fs,
-        degrees=degrees_t, structure=structure, n_transient=nt, history_=history,
-        cost_=cost_best, cost_val_=cost_val_best,
-    )  # fmt: skip
+    return best, history
 
 
 def output_equation_start(
     data: PeriodicData,
     lin: LinearStateSpace,
-    degrees: Sequence[int] = (2, 3),
-    structure: str = "full",
-    validation: PeriodicData | None = None,
+    settings: PnlssSettings = PnlssSettings(),
     *,
-    equations: str = "state+output",
+    validation: PeriodicData | None = None,
     record_weights: np.ndarray | None = None,
     validation_weights: np.ndarray | None = None,
 ) -> PNLSSModel:
@@ -617,16 +773,14 @@ def output_equation_start(
     (the usual PNLSS initialisation puts F = 0, Paduart et al. 2010 §4; here the lift curve's
     curvature over several offsets is far from linear, and LM starts much closer this way).
     With ``equations="state"`` (no F) the same solve refits C, D and the offset. Pass the
-    result to `fit_pnlss(..., initial_model=...)`.
+    result, with the same settings, to `fit_pnlss(..., initial_model=...)`; the start uses the
+    settings' degrees, structure, equations and n_transient, not their max_iter (no LM trial).
+    The other arguments are fit_pnlss's.
     """
-    from dataclasses import replace
-
-    from .monomials import evaluate_monomials
-
     weights = record_weights
     base = fit_pnlss(
-        data, lin, degrees=degrees, structure=structure, max_iter=0, validation=validation,
-        equations=equations, record_weights=weights, validation_weights=validation_weights,
+        data, lin, replace(settings, max_iter=0), validation=validation, record_weights=weights,
+        validation_weights=validation_weights,
     )  # fmt: skip
     nx = base.nx
     un_all = (data.u - base.u_mean[0]) / base.u_scale[0]

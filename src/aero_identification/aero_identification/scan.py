@@ -59,7 +59,7 @@ from .data import PeriodicData
 from .metrics import steady_state_response
 from .models import LinearStateSpace, PNLSSModel
 from .monomials import STRUCTURES, check_degrees
-from .pnlss import EQUATIONS, fit_pnlss, output_equation_start, stress_periods
+from .pnlss import EQUATIONS, PnlssSettings, fit_pnlss, output_equation_start, stress_periods
 
 __all__ = ["Candidate", "ScanResult", "ScanRow", "candidate_grid", "fit_candidate", "scan_pnlss"]
 
@@ -242,7 +242,7 @@ def scan_pnlss(
             pipeline's start, for outputs with a strong static nonlinearity such as lift over
             several offsets).
         stress: every fit keeps only iterates that stay bounded on the validation inputs
-            scaled about their mean by this factor (fit_pnlss), and a candidate whose
+            scaled about their mean by this factor (PnlssSettings.stress), and a candidate whose
             steady-state response there diverges or is not periodic is rejected (status
             "unstable at …"; module docs). None: no such check.
         splits: further (training, held-out) splits of the same records, e.g. with another
@@ -491,26 +491,21 @@ def fit_candidate(
         numba.set_num_threads(int(threads))  # this thread's kernels (a Dask worker's task)
     t0 = time.perf_counter()
     try:
+        settings = PnlssSettings(
+            degrees=candidate.degrees, structure=candidate.structure,
+            equations=candidate.equations, max_iter=int(options.get("max_iter", 50)),
+            stress=options.get("stress"),
+        )  # fmt: skip
+        rw, vw = options.get("record_weights"), options.get("validation_weights")
         initial = None
         if candidate.start == "output_ls":
             initial = output_equation_start(
-                data, lin, candidate.degrees, candidate.structure, validation,
-                equations=candidate.equations, record_weights=options.get("record_weights"),
-                validation_weights=options.get("validation_weights"),
-            )  # fmt: skip
+                data, lin, settings, validation=validation, record_weights=rw, validation_weights=vw
+            )
         model = fit_pnlss(
-            data,
-            lin,
-            degrees=candidate.degrees,
-            structure=candidate.structure,
-            equations=candidate.equations,
-            max_iter=int(options.get("max_iter", 50)),
-            validation=validation,
-            record_weights=options.get("record_weights"),
-            validation_weights=options.get("validation_weights"),
-            initial_model=initial,
-            stress=options.get("stress"),
-        )
+            data, lin, settings, validation=validation, initial_model=initial, record_weights=rw,
+            validation_weights=vw,
+        )  # fmt: skip
         val, se = periodic_error(model, validation, options.get("validation_weights"))
         train, _ = periodic_error(model, data, options.get("record_weights"))
         status = "ok" if math.isfinite(val) else "diverges on the validation data"
@@ -544,7 +539,7 @@ def _n_params(model: PNLSSModel) -> int:
 def periodic_at(model: PNLSSModel, data: PeriodicData, scale: float) -> bool:
     """Whether the model reaches a bounded periodic steady state on each realization's input
     scaled about its mean by `scale`, and on two random-phase periods of the same amplitude
-    spectrum per realization (pnlss.stress_periods, the inputs fit_pnlss(stress=) checks).
+    spectrum per realization (pnlss.stress_periods, the inputs PnlssSettings.stress checks).
 
     A stable system driven by a periodic input settles to a periodic response (the premise of
     the BLA framework, Pintelon & Schoukens 2012 §3.4); a model that diverges, or whose last

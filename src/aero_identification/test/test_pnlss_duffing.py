@@ -12,7 +12,7 @@ import pytest
 from aero_identification.bla import BLA
 from aero_identification.data import PeriodicData
 from aero_identification.models import LinearStateSpace, PNLSSModel
-from aero_identification.pnlss import fit_pnlss
+from aero_identification.pnlss import PnlssSettings, fit_pnlss
 from aero_identification.subspace import fit_linear_ss
 
 N = 1024  # samples per period
@@ -111,8 +111,8 @@ def duffing_case() -> Case:
 @pytest.fixture(scope="module")
 def duffing_model(duffing_case: Case) -> PNLSSModel:
     c = duffing_case
-    return fit_pnlss(c.data, c.lin, degrees=(2, 3), structure="full", max_iter=40,
-                     validation=(c.u_val, c.y_val))  # fmt: skip
+    settings = PnlssSettings(degrees=(2, 3), structure="full", max_iter=40)
+    return fit_pnlss(c.data, c.lin, settings, validation=(c.u_val, c.y_val))
 
 
 def test_pnlss_duffing_beats_linear_tenfold_and_reaches_noise_floor(duffing_case, duffing_model):
@@ -127,15 +127,16 @@ def test_pnlss_duffing_beats_linear_tenfold_and_reaches_noise_floor(duffing_case
 
 def test_pnlss_noise_weighted_fit_reaches_noise_floor(duffing_case):
     c = duffing_case
-    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), structure="statesonly", max_iter=30,
-                      validation=(c.u_val, c.y_val), weighting="noise")  # fmt: skip
+    settings = PnlssSettings(degrees=(2, 3), structure="statesonly", max_iter=30,
+                             weighting="noise")  # fmt: skip
+    model = fit_pnlss(c.data, c.lin, settings, validation=(c.u_val, c.y_val))
     noise_floor = rel_rms(c.y_val, c.y_val_true)
     assert rel_rms(c.y_val, model.simulate(c.u_val)) <= 2 * noise_floor
 
 
 def test_pnlss_on_linear_system_is_not_worse_than_linear_model():
     case = make_case(k3=0.0, seed=2)
-    model = fit_pnlss(case.data, case.lin, degrees=(2, 3), max_iter=15,
+    model = fit_pnlss(case.data, case.lin, PnlssSettings(degrees=(2, 3), max_iter=15),
                       validation=(case.u_val, case.y_val))  # fmt: skip
     e_lin = rel_rms(case.y_val, case.lin.simulate(case.u_val))
     e_pnlss = rel_rms(case.y_val, model.simulate(case.u_val))
@@ -166,20 +167,20 @@ def test_diverging_steps_from_a_bad_start_are_rejected(duffing_case):
     # Bad start: the linear model (canonical modal basis, pnlss.modal_basis) plus the largest
     # softening cubic term x₁³ in the first state equation that keeps the training simulation
     # finite.
-    start = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=0)
+    start = fit_pnlss(c.data, c.lin, PnlssSettings(degrees=(2, 3), max_iter=0))
     cubic = int(np.flatnonzero((start.exponents_state == [3, 0, 0]).all(axis=1))[0])
     for size in (0.3, 0.2, 0.1, 0.05, 0.03):
         E = start.E.copy()
         E[0, cubic] = -size
         bad = dataclasses.replace(start, E=E)
         try:
-            fit_pnlss(c.data, c.lin, max_iter=0, initial_model=bad)
+            fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=0), initial_model=bad)
             break
         except ValueError:  # the initial model diverges: too bad a start
             continue
     # Small initial damping: long, nearly Gauss–Newton steps from the bad start.
-    model = fit_pnlss(c.data, c.lin, max_iter=30, validation=(c.u_val, c.y_val), initial_model=bad,
-                      lambda_init=1e-2)  # fmt: skip
+    model = fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=30, lambda_init=1e-2),
+                      validation=(c.u_val, c.y_val), initial_model=bad)  # fmt: skip
     h = model.history_
     assert h[0].cost > 10 * start.cost_  # the start really is bad
     diverged = [r for r in h if not math.isfinite(r.cost)]
@@ -196,7 +197,9 @@ def test_step_that_diverges_on_validation_only_is_rejected(duffing_case):
     # blow up there although they improve the training cost.
     u_big = 0.3 + 4 * (c.u_val - 0.3)
     y_big = steady_state(u_big[:N], c.k3, 2)
-    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=20, validation=(u_big, y_big))
+    model = fit_pnlss(
+        c.data, c.lin, PnlssSettings(degrees=(2, 3), max_iter=20), validation=(u_big, y_big)
+    )
     h = model.history_
     current = h[0].cost
     guarded = 0
@@ -227,17 +230,19 @@ def test_pnlss_json_round_trip_gives_identical_simulation(duffing_case, duffing_
 def test_pnlss_rejects_bad_arguments(duffing_case):
     c = duffing_case
     with pytest.raises(ValueError, match="structure"):
-        fit_pnlss(c.data, c.lin, structure="everything", max_iter=1)
+        fit_pnlss(c.data, c.lin, PnlssSettings(structure="everything", max_iter=1))
     with pytest.raises(ValueError, match="degrees"):
-        fit_pnlss(c.data, c.lin, degrees=(1, 3), max_iter=1)
+        fit_pnlss(c.data, c.lin, PnlssSettings(degrees=(1, 3), max_iter=1))
     with pytest.raises(ValueError, match="same length"):
-        fit_pnlss(c.data, c.lin, max_iter=1, validation=(c.u_val, c.y_val[:-1]))
+        fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=1), validation=(c.u_val, c.y_val[:-1]))
 
 
 def test_qr_and_normal_equation_solvers_give_the_same_fit(duffing_case):
     c = duffing_case
     fits = [
-        fit_pnlss(c.data, c.lin, max_iter=12, validation=(c.u_val, c.y_val), solver=solver)
+        fit_pnlss(
+            c.data, c.lin, PnlssSettings(max_iter=12, solver=solver), validation=(c.u_val, c.y_val)
+        )
         for solver in ("qr", "normal")
     ]
     assert [r.accepted for r in fits[0].history_] == [r.accepted for r in fits[1].history_]
@@ -250,7 +255,8 @@ def test_periodic_validation_periods_choose_the_model_in_steady_state(duffing_ca
     held_out = PeriodicData(
         u=c.u_val[N:, None, None], y=c.y_val[N:, None, None], fs=1.0, excited_lines=LINES
     )
-    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=40, validation=held_out)
+    model = fit_pnlss(c.data, c.lin, PnlssSettings(degrees=(2, 3), max_iter=40),
+                      validation=held_out)  # fmt: skip
     noise_floor = rel_rms(c.y_val, c.y_val_true)
     assert rel_rms(c.y_val, model.simulate(c.u_val)) <= 2 * noise_floor
     # cost_val_ is the steady-state error on the held-out period (second period of a
@@ -259,14 +265,14 @@ def test_periodic_validation_periods_choose_the_model_in_steady_state(duffing_ca
     assert model.cost_val_ == pytest.approx(np.mean((y_hat - c.y_val[N:]) ** 2), rel=1e-3)
     with pytest.raises(ValueError, match="validation periods have"):
         short = PeriodicData(u=held_out.u[:-2], y=held_out.y[:-2], fs=1.0, excited_lines=LINES)
-        fit_pnlss(c.data, c.lin, max_iter=1, validation=short)
+        fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=1), validation=short)
 
 
 def test_state_equation_only_has_no_output_terms_and_fits_the_duffing_truth(duffing_case):
     """The Duffing discretisation has its cubic term in the state equation only (E, F = 0)."""
     c = duffing_case
-    model = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=30, equations="state",
-                      validation=(c.u_val, c.y_val))  # fmt: skip
+    settings = PnlssSettings(degrees=(2, 3), max_iter=30, equations="state")
+    model = fit_pnlss(c.data, c.lin, settings, validation=(c.u_val, c.y_val))
     assert model.F.shape == (1, 0) and model.exponents_output.shape[0] == 0
     assert model.E.shape[1] == model.exponents_state.shape[0] > 0
     noise_floor = rel_rms(c.y_val, c.y_val_true)
@@ -277,12 +283,12 @@ def test_state_equation_only_has_no_output_terms_and_fits_the_duffing_truth(duff
 
 def test_record_weights_unit_or_uniform_change_nothing(duffing_case):
     c = duffing_case
-    base = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=8)
-    ones = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=8, record_weights=np.ones(P * M))
+    settings = PnlssSettings(degrees=(2, 3), max_iter=8)
+    base = fit_pnlss(c.data, c.lin, settings)
+    ones = fit_pnlss(c.data, c.lin, settings, record_weights=np.ones(P * M))
     np.testing.assert_allclose(ones.E, base.E, rtol=1e-8, atol=1e-12)
     assert ones.cost_ == pytest.approx(base.cost_, rel=1e-9)
-    scaled = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=8,
-                       record_weights=np.full(P * M, 7.0))  # fmt: skip
+    scaled = fit_pnlss(c.data, c.lin, settings, record_weights=np.full(P * M, 7.0))
     # The LM step is invariant to a common scale of the cost (only the reported cost scales).
     np.testing.assert_allclose(scaled.E, base.E, rtol=1e-6, atol=1e-9)
     assert scaled.cost_ == pytest.approx(7.0 * base.cost_, rel=1e-6)
@@ -296,13 +302,13 @@ def test_a_record_with_zero_weight_does_not_move_the_fit(duffing_case):
     y_bad[:, :, 1] += 5.0 * np.std(c.data.y) * np.sin(np.arange(N) / 7.0)[:, None]
     corrupted = PeriodicData(c.data.u, y_bad, c.data.fs, LINES)
     w = np.r_[np.ones(P), np.zeros(P)]  # record r = m·P + p: realization 1 weighs 0
-    a = fit_pnlss(clean, c.lin, degrees=(2, 3), max_iter=6)
-    b = fit_pnlss(corrupted, c.lin, degrees=(2, 3), max_iter=6, record_weights=w)
+    a = fit_pnlss(clean, c.lin, PnlssSettings(degrees=(2, 3), max_iter=6))
+    b = fit_pnlss(corrupted, c.lin, PnlssSettings(degrees=(2, 3), max_iter=6), record_weights=w)
     np.testing.assert_allclose(b.E, a.E, rtol=1e-5, atol=1e-8)
     with pytest.raises(ValueError, match="record_weights must be 6"):
-        fit_pnlss(corrupted, c.lin, max_iter=1, record_weights=np.ones(3))
+        fit_pnlss(corrupted, c.lin, PnlssSettings(max_iter=1), record_weights=np.ones(3))
     with pytest.raises(ValueError, match="unknown equations"):
-        fit_pnlss(corrupted, c.lin, max_iter=1, equations="output")
+        fit_pnlss(corrupted, c.lin, PnlssSettings(max_iter=1, equations="output"))
 
 
 def test_the_start_does_not_depend_on_the_linear_models_state_basis(duffing_case):
@@ -322,7 +328,9 @@ def test_the_start_does_not_depend_on_the_linear_models_state_basis(duffing_case
     Am, Bm, _ = modal_basis(c.lin.A, c.lin.B, c.lin.C)
     assert Am[0, 0] == pytest.approx(Am[1, 1]) and Bm[1, 0] == pytest.approx(0.0, abs=1e-12)
     fits = [
-        fit_pnlss(c.data, lin, degrees=(2, 3), max_iter=8, validation=(c.u_val, c.y_val))
+        fit_pnlss(
+            c.data, lin, PnlssSettings(degrees=(2, 3), max_iter=8), validation=(c.u_val, c.y_val)
+        )
         for lin in (c.lin, moved)
     ]
     y = [m.simulate(c.u_val) for m in fits]
@@ -334,25 +342,45 @@ def test_stress_rejects_iterates_and_models_that_diverge_at_a_larger_amplitude(d
     from aero_identification.scan import periodic_at
 
     c = duffing_case
-    start = fit_pnlss(c.data, c.lin, degrees=(2, 3), max_iter=0)
+    start = fit_pnlss(c.data, c.lin, PnlssSettings(degrees=(2, 3), max_iter=0))
     cubic = int(np.flatnonzero((start.exponents_state == [3, 0, 0]).all(axis=1))[0])
     E = start.E.copy()
     E[0, cubic] = 1e-3  # x₁(t+1) grows with x₁³: finite on the data, diverges at 1.5×
     grows = dataclasses.replace(start, E=E)
-    fit_pnlss(c.data, c.lin, max_iter=0, initial_model=grows)  # finite on the training data
+    fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=0), initial_model=grows)  # finite on the data
     assert periodic_at(start, c.data, 3.0)  # the linear start is stable at any amplitude
     assert periodic_at(grows, c.data, 1.0) and not periodic_at(grows, c.data, 1.5)
     # With stress 1.5 an iterate that diverges there counts as diverging: the start above is
     # flagged, and no accepted iterate is.
     val = PeriodicData(c.data.u[:, :1, :1], c.data.y[:, :1, :1], c.data.fs, c.data.excited_lines)
-    flagged = fit_pnlss(c.data, c.lin, max_iter=3, validation=val, initial_model=grows,
-                        stress=1.5)  # fmt: skip
+    flagged = fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=3, stress=1.5), validation=val,
+                        initial_model=grows)  # fmt: skip
     assert math.isinf(flagged.history_[0].cost_val)
-    plain = fit_pnlss(c.data, c.lin, max_iter=0, validation=val, initial_model=grows)
+    plain = fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=0), validation=val,
+                      initial_model=grows)  # fmt: skip
     assert math.isfinite(plain.history_[0].cost_val)  # without stress it passes
-    model = fit_pnlss(c.data, c.lin, (2, 3), max_iter=15, validation=val, stress=1.5)
+    settings = PnlssSettings(degrees=(2, 3), max_iter=15, stress=1.5)
+    model = fit_pnlss(c.data, c.lin, settings, validation=val)
     accepted = [r for r in model.history_[1:] if r.accepted]
     assert accepted and all(math.isfinite(r.cost_val) for r in accepted)
     assert periodic_at(model, c.data, 1.5)
     with pytest.raises(ValueError, match="stress needs validation"):
-        fit_pnlss(c.data, c.lin, max_iter=1, stress=1.5)
+        fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=1, stress=1.5))
+
+
+def test_settings_check_their_values_before_any_fit():
+    """PnlssSettings holds the fit's hyperparameters; the checks that need no data are its own."""
+    assert PnlssSettings(degrees=[3, 2, 3]).degrees == (2, 3)  # type: ignore[arg-type]
+    for kwargs, message in [
+        ({"max_iter": -1}, "max_iter must be >= 0"),
+        ({"solver": "lu"}, "unknown solver"),
+        ({"equations": "output"}, "unknown equations"),
+        ({"structure": "everything"}, "unknown PNLSS structure"),
+        ({"degrees": ()}, "degrees is empty"),
+        ({"n_transient": -1}, "n_transient must be >= 0"),
+        ({"stress": 0.0}, "stress needs validation data and a positive factor"),
+        ({"stress": math.inf}, "stress needs validation data and a positive factor"),
+        ({"weighting": "white"}, "unknown weighting"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            PnlssSettings(**kwargs)  # type: ignore[arg-type]
