@@ -13,7 +13,7 @@ from .data import PeriodicData
 from .level_models import kept_periods
 from .models import PNLSSModel
 from .monomials import structure_exponents
-from .pnlss import fit_pnlss, output_equation_start
+from .pnlss import PnlssSettings, fit_pnlss, output_equation_start
 from .results import IdentificationResult, LevelResult, Log
 from .scan import ScanResult, scan_pnlss
 from .subspace import fit_linear_ss
@@ -155,13 +155,15 @@ def fit_levels(
     t0 = time.perf_counter()
     try:
         weights, val_weights = level_weights(levels, config, data, validation)
+        settings = PnlssSettings(
+            degrees=config.degrees, structure=config.structure, max_iter=config.max_iter
+        )
         start = output_equation_start(
-            data, lin, degrees=config.degrees, structure=config.structure, validation=validation,
-            record_weights=weights, validation_weights=val_weights,
+            data, lin, settings, validation=validation, record_weights=weights,
+            validation_weights=val_weights,
         )  # fmt: skip
         model = fit_pnlss(
-            data, lin, degrees=config.degrees, structure=config.structure,
-            max_iter=config.max_iter, validation=validation, initial_model=start,
+            data, lin, settings, validation=validation, initial_model=start,
             record_weights=weights, validation_weights=val_weights,
         )  # fmt: skip
     except (ValueError, np.linalg.LinAlgError) as exc:
@@ -178,8 +180,8 @@ def scan_levels(
     client: Any,
     say: Log,
 ) -> ScanResult | None:
-    """The all-levels PNLSS by the cross-validated structure scan (scan.py) on `fit_levels`'s sets:
-    every order of ``config.scan_nx`` (0: the lowest level's linear order) started from the
+    """The all-levels PNLSS by the cross-validated structure scan (scan.py) on `fit_levels`'s
+    sets: every order of ``config.scan_nx`` (0: the lowest level's linear order) started from the
     lowest level's BLA; candidates whose Jacobian would exceed MAX_JACOBIAN_BYTES are left out
     and named."""
     data, validation, how = pnlss_sets(levels, config)
@@ -196,37 +198,11 @@ def scan_levels(
         train_k, held_k, _ = pnlss_sets(levels, config, fold)
         assert held_k is not None  # every level has a held-out set (checked above) in any fold
         splits.append((train_k, held_k))
-    orders = sorted({lin.nx if n == 0 else n for n in config.scan_nx})
-    degree_sets = sorted({tuple(d) for d in config.scan_degrees}, key=lambda d: (len(d), d))
-    equations = tuple(config.scan_equations)
-
-    def over(n: int, d: tuple[int, ...], eq: str) -> bool:
-        n_par = pnlss_parameters(n, d, config.structure, eq)
-        return jacobian_bytes(data, n_par) > MAX_JACOBIAN_BYTES
-
-    # The scan fits the whole grid nx × degrees × equations: drop the largest degree sets,
-    # then the highest orders, until no candidate is over the limit.
-    while (
-        degree_sets
-        and orders
-        and any(over(n, d, eq) for n in orders for d in degree_sets for eq in equations)
-    ):
-        dropped = degree_sets.pop() if len(degree_sets) > 1 else None
-        if dropped is None:
-            result.warnings.append(
-                f"scan order nx {orders[-1]} left out: even degrees {list(degree_sets[0])} are "
-                f"over the {MAX_JACOBIAN_BYTES / 1e9:g} GB Jacobian limit"
-            )
-            orders.pop()
-        else:
-            result.warnings.append(
-                f"scan degrees {list(dropped)} left out: over the "
-                f"{MAX_JACOBIAN_BYTES / 1e9:g} GB Jacobian limit at nx {orders[-1]}"
-            )
-    if not orders or not degree_sets:
-        result.warnings.append("PNLSS structure scan: every candidate is over the Jacobian limit")
+    grid = _grid_within_limit(data, lin.nx, config, result.warnings)
+    if grid is None:
         return None
-    degree_sets = [d for d in (tuple(x) for x in config.scan_degrees) if d in degree_sets]
+    orders, degree_sets = grid
+    equations = tuple(config.scan_equations)
     u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
     try:
         linear = {
@@ -262,6 +238,45 @@ def scan_levels(
     except (ValueError, OSError) as exc:  # OSError: the Dask scheduler cannot be reached
         result.warnings.append(f"PNLSS structure scan failed: {exc}")
         return None
+
+
+def _grid_within_limit(
+    data: PeriodicData, nx: int, config: IdentificationConfig, warnings: list[str]
+) -> tuple[list[int], list[tuple[int, ...]]] | None:
+    """The scan's orders and degree sets (``config.scan_nx``, 0: ``nx``; ``scan_degrees``)
+    without those whose Jacobian would exceed MAX_JACOBIAN_BYTES, each left out named in
+    ``warnings``; None when every candidate is over the limit."""
+    orders = sorted({nx if n == 0 else n for n in config.scan_nx})
+    degree_sets = sorted({tuple(d) for d in config.scan_degrees}, key=lambda d: (len(d), d))
+    equations = tuple(config.scan_equations)
+
+    def over(n: int, d: tuple[int, ...], eq: str) -> bool:
+        n_par = pnlss_parameters(n, d, config.structure, eq)
+        return jacobian_bytes(data, n_par) > MAX_JACOBIAN_BYTES
+
+    # The scan fits the whole grid nx × degrees × equations: drop the largest degree sets,
+    # then the highest orders, until no candidate is over the limit.
+    while (
+        degree_sets
+        and orders
+        and any(over(n, d, eq) for n in orders for d in degree_sets for eq in equations)
+    ):
+        dropped = degree_sets.pop() if len(degree_sets) > 1 else None
+        if dropped is None:
+            warnings.append(
+                f"scan order nx {orders[-1]} left out: even degrees {list(degree_sets[0])} are "
+                f"over the {MAX_JACOBIAN_BYTES / 1e9:g} GB Jacobian limit"
+            )
+            orders.pop()
+        else:
+            warnings.append(
+                f"scan degrees {list(dropped)} left out: over the "
+                f"{MAX_JACOBIAN_BYTES / 1e9:g} GB Jacobian limit at nx {orders[-1]}"
+            )
+    if not orders or not degree_sets:
+        warnings.append("PNLSS structure scan: every candidate is over the Jacobian limit")
+        return None
+    return orders, [d for d in (tuple(x) for x in config.scan_degrees) if d in degree_sets]
 
 
 def relative_weights(data: PeriodicData) -> np.ndarray:

@@ -7,7 +7,7 @@ import numpy as np
 from .bla import estimate_bla
 from .clustering import period_clusters
 from .data import PeriodicData, random_phase_period
-from .pnlss import fit_pnlss
+from .pnlss import PnlssSettings, fit_pnlss
 from .subspace import fit_linear_ss
 
 __all__ = ["warm_up"]
@@ -31,5 +31,5 @@ def warm_up() -> float:
     data = PeriodicData(u, y + 1e-3 * rng.standard_normal(y.shape), 1.0, lines)
     period_clusters(data)
     lin = fit_linear_ss(estimate_bla(data, method="robust"), nx=1)
-    fit_pnlss(data, lin, degrees=(2, 3), max_iter=2, validation=data)
+    fit_pnlss(data, lin, PnlssSettings(degrees=(2, 3), max_iter=2), validation=data)
     return time.perf_counter() - t0
