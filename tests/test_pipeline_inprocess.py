@@ -327,8 +327,8 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     # every level held out (pnlss_sets fold 1: training and held-out sets swapped); the kept
     # models are those of the one-split scan.
     estimation = [lv for lv in result.levels.values() if lv.role == "estimation"]
-    train, held, _ = pipeline.pnlss_sets(estimation, config)
-    train_1, held_1, how_1 = pipeline.pnlss_sets(estimation, config, fold=1)
+    train, held, _ = pnlss_training.pnlss_sets(estimation, config)
+    train_1, held_1, how_1 = pnlss_training.pnlss_sets(estimation, config, fold=1)
     assert held is not None and held_1 is not None and how_1 == "realization 0 of each level"
     np.testing.assert_array_equal(train_1.y, held.y)
     np.testing.assert_array_equal(held_1.y, train.y)

@@ -198,8 +198,8 @@ def estimation_bootstrap(
     The replicates are drawn and their linear models fitted here, in order; their PNLSS refits,
     the cost, are independent fits and run on the scan's executor (`run_refits`). With
     ``config.bootstrap_scan`` and a scanned estimate, each replicate's all-levels PNLSS comes
-    from its own structure scan instead (`scan_levels`, one after another, each on the executor), so
-    that the spread includes the selection (Efron 2014, see config.py)."""
+    from its own structure scan instead (`scan_levels`, one after another, each on the
+    executor), so that the spread includes the selection (Efron 2014, see config.py)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     every, level1 = refit_candidates(result, config)
@@ -214,37 +214,20 @@ def estimation_bootstrap(
         )
     # One structure for both tables: the level-1 PNLSS is the all-levels one, not refitted.
     same = level1 is not None and result.pnlss_level1 is result.pnlss_all and every == level1
-    quiet: Log = lambda _m: None  # noqa: E731
     replicates: list[IdentificationResult] = []
     wanted: list[Any] = []  # the refit jobs of every replicate
     slots: list[tuple[IdentificationResult, str]] = []  # where each job's model goes
     for _ in range(config.bootstrap):
-        rep = IdentificationResult(config=config, fs=result.fs, sines_planned=result.sines_planned)
+        rep = _draw_replicate(result, config, rng)
         replicates.append(rep)
-        for name, res in result.levels.items():
-            data = res.record.data
-            if res.role != "estimation" or data is None or res.linear is None:
-                rep.levels[name] = res
-                continue
-            keep = None if res.clusters is None else res.clusters.keep
-            record = dataclasses.replace(res.record, data=resample_periods(data, keep, rng))
-            res_b = LevelResult(record, res.role)
-            rep.levels[name] = res_b
-            try:
-                level_models(
-                    record, res_b, config, [], quiet, clusters=res.clusters, order=res.linear.order
-                )
-            except (ValueError, np.linalg.LinAlgError):
-                res_b.linear = None  # this replicate has no model of the level: its cells fail
         estimation = [r for r in rep.levels.values() if r.role == "estimation"]
         ready = [r for r in estimation if r.bla is not None and r.linear is not None]
-        rep.linear_level1 = estimation[0].linear if estimation else None
         if not ready or ready[0] is not estimation[0]:
             if rescan:
                 structures.append("")
             continue
         if rescan:
-            scan = scan_levels(ready, rep, config, client, quiet)
+            scan = scan_levels(ready, rep, config, client, lambda _m: None)
             rep.pnlss_all = None if scan is None else scan.best
             structures.append("" if scan is None else scan.best_row.structure_label)
             result.warnings.extend(
@@ -265,6 +248,62 @@ def estimation_bootstrap(
         return
     for (rep, slot), fitted in zip(slots, models, strict=True):
         setattr(rep, slot, fitted)
+    spread = _estimation_spread(dataset, result, replicates, same)
+    result.bootstrap = dataclasses.replace(
+        spread,
+        seconds=time.perf_counter() - t0,
+        kept_structure=kept if rescan else "",
+        replicate_structures=structures,
+    )
+    _warn_failed_refits(result, config.bootstrap)
+    result.timings_s["bootstrap"] = result.bootstrap.seconds
+    scans = (
+        f", {len(structures)} structure scans (the estimate's structure kept in "
+        f"{result.bootstrap.same_structure})"
+        if rescan
+        else ""
+    )
+    say(
+        f"Table 1 estimation bootstrap: {config.bootstrap} replicates{scans}, {len(wanted)} "
+        f"PNLSS refits ({where}), {result.bootstrap.seconds:.1f} s"
+    )
+
+
+def _draw_replicate(
+    result: IdentificationResult, config: IdentificationConfig, rng: np.random.Generator
+) -> IdentificationResult:
+    """One bootstrap replicate of the estimate: every estimation level's kept periods drawn
+    with replacement (`resample_periods`, in the levels' order), its BLA and linear model
+    refitted at the estimate's order on the estimate's clusters; no PNLSS yet."""
+    rep = IdentificationResult(config=config, fs=result.fs, sines_planned=result.sines_planned)
+    for name, res in result.levels.items():
+        data = res.record.data
+        if res.role != "estimation" or data is None or res.linear is None:
+            rep.levels[name] = res
+            continue
+        keep = None if res.clusters is None else res.clusters.keep
+        record = dataclasses.replace(res.record, data=resample_periods(data, keep, rng))
+        res_b = LevelResult(record, res.role)
+        rep.levels[name] = res_b
+        try:
+            level_models(
+                record, res_b, config, [], lambda _m: None, clusters=res.clusters,
+                order=res.linear.order,
+            )  # fmt: skip
+        except (ValueError, np.linalg.LinAlgError):
+            res_b.linear = None  # this replicate has no model of the level: its cells fail
+    estimation = [r for r in rep.levels.values() if r.role == "estimation"]
+    rep.linear_level1 = estimation[0].linear if estimation else None
+    return rep
+
+
+def _estimation_spread(
+    dataset: Dataset,
+    result: IdentificationResult,
+    replicates: Sequence[IdentificationResult],
+    same: bool,
+) -> EstimationSpread:
+    """Table 1 scored on every replicate (with its refitted PNLSS) and each cell's spread."""
     replicates_all: list[dict[Cell, float]] = []
     replicates_level1: list[dict[Cell, float]] = []
     for rep in replicates:
@@ -277,34 +316,27 @@ def estimation_bootstrap(
     spreads_level1, means_level1, failed_level1 = replicate_spreads(
         replicates_level1, list(result.errors_level1)
     )
-    result.bootstrap = EstimationSpread(
-        replicates=config.bootstrap,
+    return EstimationSpread(
+        replicates=len(replicates),
         spreads_all=spreads_all,
         spreads_level1=spreads_level1,
         means_all=means_all,
         means_level1=means_level1,
         failed_all=failed_all,
         failed_level1=failed_level1,
-        seconds=time.perf_counter() - t0,
-        kept_structure=kept if rescan else "",
-        replicate_structures=structures,
     )
-    for table, failed in (("all levels", failed_all), ("level 1", failed_level1)):
+
+
+def _warn_failed_refits(result: IdentificationResult, replicates: int) -> None:
+    assert result.bootstrap is not None
+    for table, failed in (
+        ("all levels", result.bootstrap.failed_all),
+        ("level 1", result.bootstrap.failed_level1),
+    ):
         for (model, level, f), n in failed.items():
             if n:
                 result.warnings.append(
                     f"bootstrap ({table}): {model} at {level} {f:g} Hz: the refit failed, "
                     f"diverged or was rejected by the scan's checks in {n} of "
-                    f"{config.bootstrap} replicates (its estimation spread is over the rest)"
+                    f"{replicates} replicates (its estimation spread is over the rest)"
                 )
-    result.timings_s["bootstrap"] = result.bootstrap.seconds
-    scans = (
-        f", {len(structures)} structure scans (the estimate's structure kept in "
-        f"{result.bootstrap.same_structure})"
-        if rescan
-        else ""
-    )
-    say(
-        f"Table 1 estimation bootstrap: {config.bootstrap} replicates{scans}, {len(wanted)} "
-        f"PNLSS refits ({where}), {result.bootstrap.seconds:.1f} s"
-    )

@@ -46,19 +46,10 @@ from .clustering_ablation import (
 from .config import IdentificationConfig
 from .dataset import Dataset
 from .level_models import level_models
-from .models import LinearStateSpace
 from .pnlss import one_blas_thread
-from .pnlss_training import (
-    MAX_JACOBIAN_BYTES,
-    fit_levels,
-    level_signature,
-    pnlss_parameters,
-    pnlss_sets,
-    scan_levels,
-)
+from .pnlss_training import fit_levels, level_signature, scan_levels
 from .results import IdentificationResult, LevelResult, Log
 from .validation import validate
-from .warm_up import warm_up
 
 # What a refit that only validates takes over from the previous result (identify's models_from).
 REUSED = (
@@ -236,7 +227,7 @@ def _ablation_result(
     result: IdentificationResult,
     config: IdentificationConfig,
     final: bool,
-    ablation: "Future[tuple[IdentificationResult, float]] | None",
+    ablation: Future[tuple[IdentificationResult, float]] | None,
     models_from: IdentificationResult | None,
     client: Any,
     held_out: tuple[str, ...],
@@ -275,16 +266,4 @@ def _finish(dataset: Dataset, result: IdentificationResult, t_start: float) -> N
     result.timings_s["total"] = time.perf_counter() - t_start
 
 
-__all__ = [
-    "MAX_JACOBIAN_BYTES",
-    "REUSED",
-    "IdentificationConfig",
-    "IdentificationResult",
-    "LevelResult",
-    "LinearStateSpace",
-    "clustering_effect",
-    "identify",
-    "pnlss_parameters",
-    "pnlss_sets",
-    "warm_up",
-]
+__all__ = ["REUSED", "identify"]

@@ -774,13 +774,13 @@ def output_equation_start(
     curvature over several offsets is far from linear, and LM starts much closer this way).
     With ``equations="state"`` (no F) the same solve refits C, D and the offset. Pass the
     result, with the same settings, to `fit_pnlss(..., initial_model=...)`; the start uses the
-    settings' degrees, structure, equations and n_transient, not their max_iter (no LM trial).
-    The other arguments are fit_pnlss's.
+    settings' degrees, structure, equations and n_transient, not their max_iter (no LM trial)
+    nor their stress (no trial to reject). The other arguments are fit_pnlss's.
     """
     weights = record_weights
     base = fit_pnlss(
-        data, lin, replace(settings, max_iter=0), validation=validation, record_weights=weights,
-        validation_weights=validation_weights,
+        data, lin, replace(settings, max_iter=0, stress=None), validation=validation,
+        record_weights=weights, validation_weights=validation_weights,
     )  # fmt: skip
     nx = base.nx
     un_all = (data.u - base.u_mean[0]) / base.u_scale[0]
