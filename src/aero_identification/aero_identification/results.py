@@ -46,11 +46,11 @@ class LevelResult:
         return list(self.record.excluded)
 
 
+Log = Callable[[str], None]  # an identification's progress messages
+
 # EstimationSpread.off_mean: a cell whose error is farther than this many estimation spreads
 # from the bootstrap refits' mean is named in the table's note (about 5 % of cells by chance
 # if the replicates' errors were normal around the estimate's).
-Log = Callable[[str], None]  # an identification's progress messages
-
 OFF_MEAN_SPREADS = 2.0
 
 
