@@ -297,12 +297,12 @@ class AdaptiveJudge:
         self.to_judge: list[PeriodToJudge] = []
         self.bla_errors: dict[int, list[float]] = {}
 
-    def ready(self, have: int) -> list[PeriodToJudge]:
-        """The periods both channels have reached (``have``), taken in their order."""
-        taken: list[PeriodToJudge] = []
-        while self.to_judge and self.to_judge[0].end_k <= have:
-            taken.append(self.to_judge.pop(0))
-        return taken
+    def next_ready(self, have: int) -> PeriodToJudge | None:
+        """The oldest period both channels have reached (``have``), taken; None if none has.
+        One at a time: a period whose request cannot be sent leaves the later ones waiting."""
+        if self.to_judge and self.to_judge[0].end_k <= have:
+            return self.to_judge.pop(0)
+        return None
 
     def verdicts(self, assembler: CampaignAssembler, item: PeriodToJudge) -> list[adaptive.Verdict]:
         """The verdict on the period; when it ends the realization, the level's verdict on the
@@ -446,7 +446,7 @@ class IdentificationSession:
             self.collect()
         asm = self.intake.assembler
         if self.judge is not None and asm is not None:
-            for item in self.judge.ready(self.intake.have):
+            while (item := self.judge.next_ready(self.intake.have)) is not None:
                 self.send_verdicts(asm, item)
         if self.job is not None or asm is None:
             return

@@ -230,14 +230,22 @@ def test_one_refit_covers_every_ready_one_in_their_order_and_a_final_wins() -> N
     assert not schedule.models_stale and not schedule.pending
 
 
-def test_refits_start_when_their_data_are_in_and_the_final_one_stops_the_node(
-    monkeypatch: pytest.MonkeyPatch, caplog: Any
-) -> None:
+@pytest.fixture
+def stubbed(monkeypatch: pytest.MonkeyPatch) -> tuple[IdentificationSession, Outputs, list[Any]]:
+    """A session given the plan, its refits done by the stub: (session, outputs, the stub's
+    calls as (final, reuse))."""
     calls: list[tuple[bool, bool]] = []
     monkeypatch.setattr(refit_worker, "refit", _stub_refit(calls))
     outputs = Outputs()
     session = _session(outputs)
     session.on_plan(plan_message(PLAN, T0))
+    return session, outputs, calls
+
+
+def test_refits_start_when_their_data_are_in_and_the_final_one_stops_the_node(
+    stubbed: tuple[IdentificationSession, Outputs, list[Any]], caplog: Any
+) -> None:
+    session, outputs, calls = stubbed
     last = _segment(PLAN, "multisine", 0, 0, 3)
     end_k = last.start_k + last.length - 1
     _feed(session, range(end_k))  # one sample short
@@ -306,13 +314,9 @@ def test_a_dead_worker_is_replaced_and_its_job_queued_again() -> None:
 
 
 def test_an_anomaly_during_the_final_identification_runs_it_again(
-    monkeypatch: pytest.MonkeyPatch,
+    stubbed: tuple[IdentificationSession, Outputs, list[Any]],
 ) -> None:
-    calls: list[tuple[bool, bool]] = []
-    monkeypatch.setattr(refit_worker, "refit", _stub_refit(calls))
-    outputs = Outputs()
-    session = _session(outputs)
-    session.on_plan(plan_message(PLAN, T0))
+    session, outputs, calls = stubbed
     session.start_refit(True, "plan end")
     session.on_anomaly(Anomaly("lift/invalid/1", "lift", "invalid", _stamp(3000), None).to_json())
     session.collect()
@@ -395,6 +399,30 @@ def test_rules_that_fail_leave_the_generator_going_on(caplog: Any) -> None:
     (request,) = outputs.requests
     assert request.action == "go_on" and request.reason.startswith("rules failed: KeyError")
     assert caplog.records[0].getMessage().startswith("adaptive rules failed on level 0: KeyError")
+
+
+def test_a_request_that_cannot_be_sent_leaves_the_later_periods_waiting() -> None:
+    outputs = Outputs()
+    session = _session(outputs, adaptive=True)
+    session.on_plan(plan_message(PLAN, T0))
+    periods = [_segment(PLAN, "multisine", 0, 0, p) for p in (0, 1)]
+    for segment in periods:
+        session.on_segment(_end(segment))
+    _feed(session, range(periods[1].start_k + periods[1].length))
+    sent = outputs.send_request
+
+    def fails_once(request: PlanRequest) -> None:
+        outputs.send_request = sent  # type: ignore[method-assign]
+        raise RuntimeError("publisher gone")
+
+    outputs.send_request = fails_once  # type: ignore[method-assign]
+    with pytest.raises(RuntimeError, match="publisher gone"):
+        session.on_timer()
+    assert session.judge is not None
+    assert [p.period for p in session.judge.to_judge] == [1]  # not lost with the first
+    session.on_timer()
+    assert outputs.requests  # period 1's verdicts, sent
+    assert {r.after_k for r in outputs.requests} == {periods[1].start_k + periods[1].length - 1}
 
 
 def test_a_fixed_plan_run_judges_nothing() -> None:
