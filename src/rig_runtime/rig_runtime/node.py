@@ -53,6 +53,7 @@ from .messages import (
     starts_with_header,
 )
 from .params import Parameter, ParameterError, ParameterSet, assign, default_parameters
+from .participant_profile import participant_environment
 from .qos import QosProfile, resolve_qos, to_rclpy_qos
 from .ros_environment import LAUNCHER_PID_ENV, ArgumentError
 
@@ -70,10 +71,7 @@ EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
 # they hold: Fast DDS deletes a writer at once, and a reader that lost the end of a burst (a
 # full receive queue, a paused process) gets its repair from that writer only.
 WRITER_LINGER_S = 1.0
-# Fast DDS reads its default QoS profiles from this file when the first participant is made.
-PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
-PROFILES_FILE = Path(__file__).with_name("fastdds_profiles.xml")
-PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in that file
+PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in fastdds_profiles.xml
 
 # Exit codes: 0 ok, 2 configuration error (bad parameters/arguments), 1 runtime failure.
 EXIT_CONFIG_ERROR = 2
@@ -245,8 +243,6 @@ def _new_context() -> Any:
     between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself (an
     orderly stop that lets the recorder drain), so rclpy installs no handler."""
     domain = ros_environment.check()
-    # Writers block up to 60 s for a slow reader (fastdds_profiles.xml says why).
-    os.environ.setdefault(PROFILES_ENV, str(PROFILES_FILE))
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     return context
@@ -270,22 +266,26 @@ class Node(rclpy.node.Node):
         choice = os.environ.get(EXECUTOR_ENV, "events").strip().lower()
         if choice not in ("events", "single"):  # checked before anything is created
             raise ArgumentError(f"{EXECUTOR_ENV}={choice!r}: expected 'events' or 'single'")
-        context = _new_context()
-        try:
-            # rcl parses --ros-args (names, remaps, -p, --params-file, --log-level), per node.
-            super().__init__(
-                name,
-                context=context,
-                namespace=namespace,
-                cli_args=args or None,
-                use_global_arguments=False,
-                start_parameter_services=True,
-            )
-        except Exception as exc:  # rcl's argument parser: RCLError / ValueError
-            context.try_shutdown()
-            raise ArgumentError(
-                f"invalid ROS arguments {args}: {type(exc).__name__}: {exc}"
-            ) from None
+        # rmw_fastrtps makes the participant with the first node of a context: both under the
+        # profile of participant_profile.py (discovery over UDP alone; writers that block up to
+        # 60 s for a slow reader, fastdds_profiles.xml).
+        with participant_environment():
+            context = _new_context()
+            try:
+                # rcl parses --ros-args (names, remaps, -p, --params-file, --log-level), per node.
+                super().__init__(
+                    name,
+                    context=context,
+                    namespace=namespace,
+                    cli_args=args or None,
+                    use_global_arguments=False,
+                    start_parameter_services=True,
+                )
+            except Exception as exc:  # rcl's argument parser: RCLError / ValueError
+                context.try_shutdown()
+                raise ArgumentError(
+                    f"invalid ROS arguments {args}: {type(exc).__name__}: {exc}"
+                ) from None
         self._rig_context = context
         try:
             self.name = str(self.get_name())

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from rig_runtime.node import PROFILES_ENV, PROFILES_FILE
+from rig_runtime.participant_profile import PROFILES_ENV, PROFILES_FILE
 from rig_runtime.testing import graph_env
 
 # A participant and a writer made with the file as Fast DDS's default profiles.
