@@ -8,8 +8,8 @@ every namespace is removed when the lab closes. A host's processes are started u
 
 Needs root (CAP_SYS_ADMIN, CAP_NET_ADMIN) and iproute2's ``ip``: :func:`unavailable` says why
 not, for a skip. Namespaces share the file system, so Fast DDS's shared-memory transport could
-join two hosts; its locators are offered per host id, and between namespaces Fast DDS 2.14
-sends over UDP (a pulled cable stops the data: ``tests/test_two_hosts.py``).
+join two hosts; the graph's nodes do not use it (``participant_profile.py``), so a pulled cable
+stops their data (``tests/test_two_hosts.py``).
 """
 
 import os
