@@ -43,7 +43,7 @@ _MADE_WITH: list[tuple[str, tuple[str, ...]]] = []
 def _ipv4(peer: str) -> str:
     """The first IPv4 address of a static peer, as rmw_fastrtps resolves it."""
     try:
-        return socket.getaddrinfo(peer, None, socket.AF_INET)[0][4][0]
+        return str(socket.getaddrinfo(peer, None, socket.AF_INET)[0][4][0])
     except (OSError, IndexError):
         raise RosEnvironmentError(f"ROS_STATIC_PEERS: cannot resolve {peer!r}") from None
 
