@@ -238,11 +238,10 @@ def _events_executor(context: Any) -> Any:
     return executor
 
 
-def _new_context() -> Any:
-    """A context per node: its own participant in the domain of this moment (tests move
-    between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself (an
+def _new_context(domain: int) -> Any:
+    """A context per node: its own participant in ``domain``, the domain of this moment (tests
+    move between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself (an
     orderly stop that lets the recorder drain), so rclpy installs no handler."""
-    domain = ros_environment.check()
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     return context
@@ -266,11 +265,12 @@ class Node(rclpy.node.Node):
         choice = os.environ.get(EXECUTOR_ENV, "events").strip().lower()
         if choice not in ("events", "single"):  # checked before anything is created
             raise ArgumentError(f"{EXECUTOR_ENV}={choice!r}: expected 'events' or 'single'")
+        domain = ros_environment.check()  # a bad ROS environment too
         # rmw_fastrtps makes the participant with the first node of a context: both under the
         # profile of participant_profile.py (discovery over UDP alone; writers that block up to
         # 60 s for a slow reader, fastdds_profiles.xml).
         with participant_environment():
-            context = _new_context()
+            context = _new_context(domain)
             try:
                 # rcl parses --ros-args (names, remaps, -p, --params-file, --log-level), per node.
                 super().__init__(
