@@ -15,7 +15,10 @@ So, for LOCALHOST and SUBNET, a node writes the discovery configuration rmw_fast
 into a Fast DDS profile, with UDPv4 as its only transport, and rmw is given the range
 SYSTEM_DEFAULT, with which it leaves the participant to the profile. The profile also carries
 the writers' settings of ``fastdds_profiles.xml``. A profile file of the user's own
-(``FASTRTPS_DEFAULT_PROFILES_FILE``) and the ranges OFF and SYSTEM_DEFAULT are left to rmw.
+(``FASTRTPS_DEFAULT_PROFILES_FILE``) and the ranges OFF and SYSTEM_DEFAULT are left to rmw; an
+rmw other than Fast DDS's is left the environment as it is.
+
+The environment is the process's: nodes are made one at a time (not thread-safe).
 """
 
 import os
@@ -34,18 +37,37 @@ UDP_TRANSPORT = "rig_udpv4"  # the transport descriptor's id in PROFILES_FILE
 MULTICAST_DISCOVERY = "239.255.0.1"  # RTPS's default SPDP multicast group (RTPS 2.2, 9.6.1.4.1)
 # The ranges rmw_fastrtps would configure with shared memory, written here over UDP instead.
 OVER_UDP = ("LOCALHOST", "SUBNET")
+RMW_ENV = "RMW_IMPLEMENTATION"
+FASTDDS_RMWS = ("", "rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")  # "": Jazzy's default
+# Deprecated in Jazzy; rcl then makes the range LOCALHOST whatever ROS_AUTOMATIC_DISCOVERY_RANGE
+# says (rcl 9.2, init.c), so it is read as LOCALHOST here and kept from rcl.
+LOCALHOST_ONLY_ENV = "ROS_LOCALHOST_ONLY"
 
-# The discovery configuration this process's participants were made with (Fast DDS keeps the
-# profile it read first): a node with another one needs a process of its own.
-_MADE_WITH: list[tuple[str, tuple[str, ...]]] = []
+# The Fast DDS configuration this process's participants were made with: Fast DDS keeps the
+# profile it read first, so a node with another one needs a process of its own.
+_MADE_WITH: list[tuple[str, ...]] = []
 
 
 def _ipv4(peer: str) -> str:
-    """The first IPv4 address of a static peer, as rmw_fastrtps resolves it."""
+    """A static peer's IPv4 address as rmw_fastrtps takes it: the first of the name's addresses
+    in string order (a std::set of them)."""
     try:
-        return str(socket.getaddrinfo(peer, None, socket.AF_INET)[0][4][0])
-    except (OSError, IndexError):
-        raise RosEnvironmentError(f"ROS_STATIC_PEERS: cannot resolve {peer!r}") from None
+        found = socket.getaddrinfo(peer, None, socket.AF_INET)
+    except (OSError, UnicodeError):
+        found = []
+    addresses = sorted({str(info[4][0]) for info in found})
+    if not addresses:
+        raise RosEnvironmentError(
+            f"ROS_STATIC_PEERS: {peer!r} has no IPv4 address (rmw_fastrtps reaches static "
+            "peers over IPv4)"
+        )
+    return addresses[0]
+
+
+def _describe(config: tuple[str, ...]) -> str:
+    if config[0] == "profile":
+        return f"the Fast DDS profile file {config[1]}"
+    return f"discovery range {config[1]} over UDP with peers {list(config[2:])}"
 
 
 def _locator(address: str | None) -> str:
@@ -88,36 +110,44 @@ def profiles_xml(range_: str, peers: list[str]) -> str:
 
 @contextmanager
 def participant_environment(env: MutableMapping[str, str] | None = None) -> Iterator[None]:
-    """The environment rmw reads while a participant is made (``rclpy.init``), restored after.
+    """The environment rmw reads while a participant is made (``rclpy.init`` and the context's
+    first node), restored after.
 
     LOCALHOST and SUBNET become SYSTEM_DEFAULT with a profile that configures them over UDP;
-    other ranges get PROFILES_FILE; a profile file the user set is left as it is.
+    other ranges get PROFILES_FILE; a profile file the user set is left as it is. A process
+    whose participants were made with another of these configurations is refused.
     """
     env = os.environ if env is None else env
-    if PROFILES_ENV in env:
-        yield
+    if env.get(RMW_ENV, "").strip() not in FASTDDS_RMWS:
+        yield  # not Fast DDS: its own configuration
         return
-    range_ = discovery_range(env)
-    saved = {key: env.get(key) for key in (PROFILES_ENV, RANGE_ENV)}
+    saved = {key: env.get(key) for key in (PROFILES_ENV, RANGE_ENV, LOCALHOST_ONLY_ENV)}
+    localhost_only = env.get(LOCALHOST_ONLY_ENV, "").strip() == "1"
+    range_ = "LOCALHOST" if localhost_only else discovery_range(env)
     with tempfile.TemporaryDirectory(prefix="rig_fastdds_") as tmp:
-        if range_ in OVER_UDP:
-            peers = tuple(_ipv4(p) for p in static_peers(env))
-            if _MADE_WITH and _MADE_WITH[0] != (range_, peers):
-                made_range, made_peers = _MADE_WITH[0]
-                raise RosEnvironmentError(
-                    f"this process's participants use discovery range {made_range} with "
-                    f"peers {list(made_peers)}; a node with range {range_} and peers "
-                    f"{list(peers)} needs a process of its own"
-                )
+        if PROFILES_ENV in env:
+            config: tuple[str, ...] = ("profile", env[PROFILES_ENV])
+        elif range_ in OVER_UDP:
+            config = ("udp", range_, *(_ipv4(p) for p in static_peers(env)))
+        else:
+            config = ("profile", str(PROFILES_FILE))
+        if _MADE_WITH and _MADE_WITH[0] != config:
+            raise RosEnvironmentError(
+                f"this process's participants were made with {_describe(_MADE_WITH[0])}; a "
+                f"node with {_describe(config)} needs a process of its own (Fast DDS keeps "
+                "the profile it read first)"
+            )
+        if config[0] == "udp":
             profile = Path(tmp) / "fastdds_profiles.xml"
-            profile.write_text(profiles_xml(range_, list(peers)))
+            profile.write_text(profiles_xml(range_, list(config[2:])))
             env[PROFILES_ENV] = str(profile)
             env[RANGE_ENV] = "SYSTEM_DEFAULT"
-            _MADE_WITH[:1] = [(range_, peers)]
+            env.pop(LOCALHOST_ONLY_ENV, None)
         else:
-            env[PROFILES_ENV] = str(PROFILES_FILE)
+            env[PROFILES_ENV] = config[1]
         try:
             yield
+            _MADE_WITH[:1] = [config]  # not before: a node that failed may have made none
         finally:
             for key, value in saved.items():
                 if value is None:

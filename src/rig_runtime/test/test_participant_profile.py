@@ -57,17 +57,64 @@ def test_rmw_reads_system_default_and_the_profile_only_while_the_participant_is_
         with open(env[PROFILES_ENV]) as profile:
             assert "<participant " in profile.read()
     assert env == {RANGE_ENV: "LOCALHOST", "ROS_STATIC_PEERS": "127.0.0.1"}
-    # Another range in the same process: Fast DDS keeps the profile it read first.
+    # The same configuration again is fine; another one in the same process is refused: Fast
+    # DDS keeps the profile it read first.
+    with participant_environment(dict(env)):
+        pass
+    for other in ({RANGE_ENV: "SUBNET"}, {RANGE_ENV: "OFF"}, {**env, PROFILES_ENV: "/my.xml"}):
+        with pytest.raises(RosEnvironmentError, match="needs a process of its own"):
+            with participant_environment(dict(other)):
+                pass
+
+
+def test_off_and_system_default_get_the_writers_profile_and_share_a_process(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+    for range_ in ("OFF", "SYSTEM_DEFAULT"):
+        env = {RANGE_ENV: range_}
+        with participant_environment(env):
+            assert env == {RANGE_ENV: range_, PROFILES_ENV: str(PROFILES_FILE)}
+        assert env == {RANGE_ENV: range_}
     with pytest.raises(RosEnvironmentError, match="needs a process of its own"):
-        with participant_environment({RANGE_ENV: "SUBNET"}):
+        with participant_environment({RANGE_ENV: "LOCALHOST"}):
             pass
-    other: dict[str, str] = {RANGE_ENV: "OFF"}
-    with participant_environment(other):
-        assert other == {RANGE_ENV: "OFF", PROFILES_ENV: str(PROFILES_FILE)}
-    assert other == {RANGE_ENV: "OFF"}
 
 
-def test_a_profile_file_of_the_users_own_is_left_to_rmw() -> None:
+def test_a_node_that_failed_does_not_fix_the_process_configuration(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+    with pytest.raises(ValueError):
+        with participant_environment({RANGE_ENV: "OFF"}):
+            raise ValueError("bad ROS arguments")
+    with participant_environment({RANGE_ENV: "LOCALHOST"}):
+        pass
+    assert participant_profile._MADE_WITH == [("udp", "LOCALHOST")]
+
+
+def test_ros_localhost_only_is_read_as_localhost_and_kept_from_rcl(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+    env = {RANGE_ENV: "SUBNET", "ROS_LOCALHOST_ONLY": "1"}
+    with participant_environment(env):
+        assert env[RANGE_ENV] == "SYSTEM_DEFAULT" and "ROS_LOCALHOST_ONLY" not in env
+        with open(env[PROFILES_ENV]) as profile:
+            assert "<metatrafficUnicastLocatorList>" in profile.read()
+    assert env == {RANGE_ENV: "SUBNET", "ROS_LOCALHOST_ONLY": "1"}
+
+
+def test_another_rmw_is_left_the_environment_as_it_is(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+    env = {RANGE_ENV: "LOCALHOST", "RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}
+    with participant_environment(env):
+        assert env == {RANGE_ENV: "LOCALHOST", "RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}
+    assert participant_profile._MADE_WITH == []
+
+
+def test_a_profile_file_of_the_users_own_is_left_to_rmw(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
     env = {RANGE_ENV: "LOCALHOST", PROFILES_ENV: "/etc/mine.xml"}
     with participant_environment(env):
         assert env == {RANGE_ENV: "LOCALHOST", PROFILES_ENV: "/etc/mine.xml"}
@@ -76,7 +123,7 @@ def test_a_profile_file_of_the_users_own_is_left_to_rmw() -> None:
 def test_a_peer_that_does_not_resolve_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
     env = {RANGE_ENV: "LOCALHOST", "ROS_STATIC_PEERS": "no-such-host.invalid"}
-    with pytest.raises(RosEnvironmentError, match=r"cannot resolve 'no-such-host\.invalid'"):
+    with pytest.raises(RosEnvironmentError, match=r"'no-such-host\.invalid' has no IPv4 address"):
         with participant_environment(env):
             pass
     assert PROFILES_ENV not in env and env[RANGE_ENV] == "LOCALHOST"
@@ -100,8 +147,8 @@ print(json.dumps(sorted({c.laddr.port for c in psutil.Process().net_connections(
 """
 
 
-def _probe(kind: str) -> tuple[list[str], list[int], str]:
-    env = graph_env()  # LOCALHOST: this machine only
+def _probe(kind: str, range_: str = "LOCALHOST") -> tuple[list[str], list[int], str]:
+    env = {**graph_env(), RANGE_ENV: range_}  # graph_env: LOCALHOST, this machine only
     done = subprocess.run(
         [sys.executable, "-c", PROBE, kind], env=env, capture_output=True, text=True, timeout=60
     )
@@ -119,3 +166,9 @@ def test_a_node_maps_no_shared_memory_port_and_on_localhost_no_multicast_port() 
     # The check can fail: rmw_fastrtps's own LOCALHOST maps its shared-memory ports.
     shm, multicast, _ = _probe("plain")
     assert any("fastrtps_port" in path for path in shm) and multicast == []
+
+
+def test_a_node_on_subnet_maps_no_shared_memory_port_and_discovers_by_multicast() -> None:
+    shm, multicast, out = _probe("rig", "SUBNET")
+    assert shm == [] and multicast != [], out
+    assert "XMLPARSER" not in out
