@@ -267,8 +267,9 @@ def test_limits_on_host_then_hold_and_ramp_when_commands_stop(rig: Any) -> None:
     # No applied setpoint beyond the host limits, none non-finite: the controller never saw
     # the 60°, the −40° or the NaN.
     applied = np.degrees([r["position_rad"] for r in records if r["event"] == "apply"])
-    assert applied.max() == pytest.approx(25.0, abs=1e-9)
-    assert applied.min() == pytest.approx(-5.0, abs=1e-9)
+    # (The low limit is approached by the ramp: how close it comes in 0.7 s depends on timing.)
+    assert applied.max() <= 25.0 + 1e-9 and applied.min() >= -5.0 - 1e-9, applied
+    assert applied.max() == pytest.approx(25.0, abs=1e-3) and applied.min() < -4.99
     assert not [r for r in records if r["event"] in ("rejected_nonfinite", "invalid")]
     assert "watchdog" not in [r["mode"] for r in records if r["event"] == "mode"]
 
