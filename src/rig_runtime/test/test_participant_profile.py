@@ -23,6 +23,12 @@ from rig_runtime.testing import graph_env
 LOCATOR = "<locator><udpv4><address>{}</address></udpv4></locator>"
 
 
+@pytest.fixture(autouse=True)
+def new_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each test as a process that has made no participant yet."""
+    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+
+
 def test_localhost_discovers_by_unicast_on_this_host_only() -> None:
     xml = participant_xml("LOCALHOST", ["10.0.0.7"])
     unicast = "<metatrafficUnicastLocatorList><locator><udpv4></udpv4></locator>"
@@ -47,10 +53,7 @@ def test_the_profile_adds_the_participant_to_the_writers_settings() -> None:
     assert text.rstrip().endswith("</participant>\n</profiles>")
 
 
-def test_rmw_reads_system_default_and_the_profile_only_while_the_participant_is_made(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+def test_rmw_reads_system_default_and_the_profile_only_while_the_participant_is_made() -> None:
     env = {RANGE_ENV: "LOCALHOST", "ROS_STATIC_PEERS": "127.0.0.1"}
     with participant_environment(env):
         assert env[RANGE_ENV] == "SYSTEM_DEFAULT"
@@ -67,10 +70,7 @@ def test_rmw_reads_system_default_and_the_profile_only_while_the_participant_is_
                 pass
 
 
-def test_off_and_system_default_get_the_writers_profile_and_share_a_process(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+def test_off_and_system_default_get_the_writers_profile_and_share_a_process() -> None:
     for range_ in ("OFF", "SYSTEM_DEFAULT"):
         env = {RANGE_ENV: range_}
         with participant_environment(env):
@@ -81,10 +81,7 @@ def test_off_and_system_default_get_the_writers_profile_and_share_a_process(
             pass
 
 
-def test_a_node_that_failed_does_not_fix_the_process_configuration(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+def test_a_node_that_failed_does_not_fix_the_process_configuration() -> None:
     with pytest.raises(ValueError):
         with participant_environment({RANGE_ENV: "OFF"}):
             raise ValueError("bad ROS arguments")
@@ -93,10 +90,7 @@ def test_a_node_that_failed_does_not_fix_the_process_configuration(
     assert participant_profile._MADE_WITH == [("udp", "LOCALHOST")]
 
 
-def test_ros_localhost_only_is_read_as_localhost_and_kept_from_rcl(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+def test_ros_localhost_only_is_read_as_localhost_and_kept_from_rcl() -> None:
     env = {RANGE_ENV: "SUBNET", "ROS_LOCALHOST_ONLY": "1"}
     with participant_environment(env):
         assert env[RANGE_ENV] == "SYSTEM_DEFAULT" and "ROS_LOCALHOST_ONLY" not in env
@@ -105,23 +99,20 @@ def test_ros_localhost_only_is_read_as_localhost_and_kept_from_rcl(
     assert env == {RANGE_ENV: "SUBNET", "ROS_LOCALHOST_ONLY": "1"}
 
 
-def test_another_rmw_is_left_the_environment_as_it_is(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+def test_another_rmw_is_left_the_environment_as_it_is() -> None:
     env = {RANGE_ENV: "LOCALHOST", "RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}
     with participant_environment(env):
         assert env == {RANGE_ENV: "LOCALHOST", "RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}
     assert participant_profile._MADE_WITH == []
 
 
-def test_a_profile_file_of_the_users_own_is_left_to_rmw(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+def test_a_profile_file_of_the_users_own_is_left_to_rmw() -> None:
     env = {RANGE_ENV: "LOCALHOST", PROFILES_ENV: "/etc/mine.xml"}
     with participant_environment(env):
         assert env == {RANGE_ENV: "LOCALHOST", PROFILES_ENV: "/etc/mine.xml"}
 
 
-def test_a_peer_that_does_not_resolve_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(participant_profile, "_MADE_WITH", [])
+def test_a_peer_that_does_not_resolve_is_a_clear_error() -> None:
     env = {RANGE_ENV: "LOCALHOST", "ROS_STATIC_PEERS": "no-such-host.invalid"}
     with pytest.raises(RosEnvironmentError, match=r"'no-such-host\.invalid' has no IPv4 address"):
         with participant_environment(env):
