@@ -89,8 +89,11 @@ def test_identification_of_the_short_campaign(campaign) -> None:
 
 def test_refits_reuse_unchanged_models_exactly(campaign) -> None:
     asm = _assemble(campaign)
-    single = IdentificationConfig(scan=False)  # the final scan is tested below
+    # No stage of the final models' own (the scan, the ablation: tested below): every refit
+    # fits the final models, and the final call takes them over.
+    single = IdentificationConfig(scan=False, clustering_ablation=False)
     first = identify(asm, single)
+    assert first.final_models
     again = identify(asm, single, previous=first)
     assert again.pnlss_level1 is first.pnlss_level1  # level 1 unchanged: not refitted
     validated = identify(asm, single, final=True, models_from=first)
@@ -358,6 +361,45 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     assert written["pnlss_scan_plot"].stat().st_size > 10_000
     payload = json.loads((tmp_path / "models.json").read_text())
     assert sum(row["selected"] for row in payload["pnlss_scan"]["table"]) == 1
+
+
+def test_final_models_fitted_while_the_last_sines_stream_are_only_validated_at_the_end(
+    campaign,
+) -> None:
+    """final_models (the identifier's refit once every multisine period of the plan is in):
+    the structure scan and the clustering ablation run then, and the final call takes their
+    models over and only validates: the same tables as a final identification from scratch."""
+    plan, stamps, u, y = campaign
+    asm = _assemble(campaign)
+    end = asm.multisine_end_k + 1
+    assert 0 < end < len(stamps) and any(
+        s.kind == "sine" and s.start_k >= end for s in plan.segments
+    )
+    streaming = CampaignAssembler(plan, T0)
+    streaming.add_many("u", stamps[:end], u[:end])
+    streaming.add_many("y", stamps[:end], y[:end])
+    config = IdentificationConfig(
+        max_iter=5, scan=True, scan_nx=(1,), scan_degrees=((2,),), scan_max_iter=5, scan_workers=1
+    )
+    early = identify(streaming, config, final_models=True)
+    assert early.final_models and not early.complete
+    assert early.scan is not None and early.no_clustering is not None
+    # A refit of the sines in between (validation only) keeps them final models.
+    between = identify(streaming, config, models_from=early)
+    assert between.final_models and between.scan is early.scan
+    final = identify(asm, config, final=True, models_from=between)
+    assert final.complete and final.scan is early.scan and final.pnlss_all is early.pnlss_all
+    assert final.timings_s["pnlss"] == 0.0  # nothing fitted
+    scratch = identify(asm, config, final=True)
+    assert scratch.scan is not early.scan
+    assert (
+        final.tables() == scratch.tables() and final.errors_all
+    )  # Table 1, with clustering and without
+    # An online refit's models are not final models: the final call fits them afresh.
+    interim = identify(streaming, config)
+    assert not interim.final_models and interim.scan is None
+    refitted = identify(asm, config, final=True, models_from=interim)
+    assert refitted.scan is not None and refitted.tables() == scratch.tables()
 
 
 # A small scan (one candidate structure, 10 LM iterations) and 3 replicates: what the bootstrap

@@ -38,6 +38,7 @@ def start_ablation(
     result: IdentificationResult,
     config: IdentificationConfig,
     final: bool,
+    final_models: bool,
     client: Any,
     held_out: tuple[str, ...],
     say: Log,
@@ -47,13 +48,13 @@ def start_ablation(
     cannot run beside: `ablation_beside`). Its future gives (result, seconds). The caller
     holds one BLAS thread (`identify`) until it has the result, so both threads' fits run
     with the same BLAS as one after the other would, and give the same numbers."""
-    if not (final and config.clustering and config.clustering_ablation):
+    if not (final_models and config.clustering and config.clustering_ablation):
         return None
     if not clustering_dropped(result) or not ablation_beside(config, client):
         return None
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clustering_ablation")
     future = pool.submit(
-        run_ablation, identify, dataset, ablation_config(config), client, held_out, say
+        run_ablation, identify, dataset, ablation_config(config), final, client, held_out, say
     )
     pool.shutdown(wait=False)  # the thread ends with its job; the caller waits on the future
     return future
@@ -72,14 +73,23 @@ def run_ablation(
     identify: Identify,
     dataset: Dataset,
     plain: IdentificationConfig,
+    final: bool,
     client: Any,
     held_out: tuple[str, ...],
     say: Log,
 ) -> tuple[IdentificationResult, float]:
-    """The same pipeline without clustering, and its seconds; its messages say so."""
+    """The same pipeline without clustering, its final models (`identify`'s
+    ``final_models``), and its seconds; its messages say so."""
     t0 = time.perf_counter()
-    done = identify(dataset, plain, final=True, client=client, held_out=held_out,
-                    log=lambda message: say(f"no clustering: {message}"))  # fmt: skip
+    done = identify(
+        dataset,
+        plain,
+        final=final,
+        final_models=True,
+        client=client,
+        held_out=held_out,
+        log=lambda message: say(f"no clustering: {message}"),
+    )
     return done, time.perf_counter() - t0
 
 

@@ -199,6 +199,13 @@ class RefitSchedule:
     def __init__(self) -> None:
         self.pending: list[PendingRefit] = []
         self.models_stale = True  # new periods, an anomaly, a revision: fit afresh, not reuse
+        # How often an anomaly or a revision made the models stale: one that comes while a
+        # refit runs on the data before it leaves them stale after that refit too.
+        self.changes = 0
+
+    def mark_stale(self) -> None:
+        self.models_stale = True
+        self.changes += 1
 
     def add(self, refit: PendingRefit) -> None:
         self.pending.append(refit)
@@ -229,6 +236,7 @@ class RefitJob:
     final: bool
     started: float  # time.monotonic() when it was submitted
     anomalies: int  # anomalies its data snapshot includes (Intake.anomalies_received)
+    changes: int = 0  # RefitSchedule.changes when it was submitted
 
 
 class RefitWorker:
@@ -257,9 +265,10 @@ class RefitWorker:
         final: bool,
         out_dir: str,
         reuse: bool,
+        final_models: bool = False,
     ) -> "Future[RefitOutcome]":
         """refit_worker.refit in the worker; inline, a future that is already done."""
-        args = (assembler, config, final, out_dir, reuse)
+        args = (assembler, config, final, out_dir, reuse, final_models)
         if self.executor is not None:
             return self.executor.submit(refit_worker.refit, *args)
         done: Future[RefitOutcome] = Future()
@@ -393,7 +402,7 @@ class IdentificationSession:
                     self.errors.append(f"{EXPERIMENT_PLAN.name}: {exc}")
                     self.logger.error("%s; the previous revision is kept", self.errors[-1])
                     return
-                self.schedule.models_stale = True
+                self.schedule.mark_stale()
                 self.logger.info(
                     "plan revision %d: %d samples (%.1f s), %d multisine blocks",
                     plan.revision,
@@ -425,7 +434,7 @@ class IdentificationSession:
             self.logger.error("%s", exc)
             return
         if self.intake.add_anomaly(anomaly):
-            self.schedule.models_stale = True  # periods may be excluded now: fit afresh
+            self.schedule.mark_stale()  # periods may be excluded now: fit afresh
 
     def on_segment(self, event: dict[str, Any]) -> None:
         """An ``/experiment/segment`` event: decisions, periods to judge, refits due."""
@@ -473,23 +482,30 @@ class IdentificationSession:
             )
 
     def start_refit(self, final: bool, reason: str) -> None:
-        assert self.intake.assembler is not None
+        asm = self.intake.assembler
+        assert asm is not None
         started = time.monotonic()
         # Only sines completed since the last refit: the worker keeps its models and validates
         # them again.
         reuse = not self.schedule.models_stale and self.refits > 0
+        # Every multisine period of a fixed plan is in (an adaptive run's plan may still grow):
+        # the final models are fitted now, while the last sines stream, and the final job
+        # validates them (pipeline.identify's final_models).
+        final_models = (
+            not final and self.judge is None and 0 <= asm.multisine_end_k <= self.intake.have
+        )
         self.logger.info(
             "%s %d (%s)%s",
             "validation" if reuse else "refit",
             self.refits + 1,
             reason,
-            " [final]" if final else "",
+            " [final]" if final else " [final models]" if final_models and not reuse else "",
         )
         anomalies = self.intake.anomalies_received
         future = self.worker.submit(
-            self.intake.assembler, self.settings.config, final, self.settings.output_dir, reuse
+            asm, self.settings.config, final, self.settings.output_dir, reuse, final_models
         )
-        self.job = RefitJob(future, reason, final, started, anomalies)
+        self.job = RefitJob(future, reason, final, started, anomalies, self.schedule.changes)
 
     def collect(self) -> None:
         """The finished refit's result: publish the models, or keep the previous ones."""
@@ -512,7 +528,7 @@ class IdentificationSession:
             self.outputs.publish_status()
             return
         self.job = None
-        self.schedule.models_stale = False
+        self.schedule.models_stale = self.schedule.changes != job.changes
         self.refits += 1
         self.refit_times.append(elapsed)
         self.last_summary = summary

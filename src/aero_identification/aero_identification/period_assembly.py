@@ -237,6 +237,13 @@ class CampaignAssembler:
         self.anomalies = marks
         self._apply_marks()
 
+    @property
+    def multisine_end_k(self) -> int:
+        """The plan's last multisine sample (-1: none): once both channels are past it, every
+        multisine period of the plan is in."""
+        ends = [s.start_k + s.length - 1 for s in self._slots if s.kind == "multisine"]
+        return max(ends, default=-1)
+
     def index_of(self, stamp_ns: int) -> int:
         return round((stamp_ns - self.t0_ns) / self.period_ns)
 

@@ -54,8 +54,14 @@ from .validation import validate
 # What a refit that only validates takes over from the previous result (identify's models_from).
 REUSED = (
     "levels", "linear_level1", "pnlss_all", "scan", "no_clustering", "pnlss_level1",
-    "level1_signature", "pnlss_start_level", "pnlss_held_out",
+    "level1_signature", "pnlss_start_level", "pnlss_held_out", "final_models",
 )  # fmt: skip
+
+
+def final_stages(config: IdentificationConfig) -> bool:
+    """Whether the final models need stages the online refits skip: the structure scan of
+    the all-levels PNLSS, the clustering ablation."""
+    return (config.pnlss and config.scan) or (config.clustering and config.clustering_ablation)
 
 
 def identify(
@@ -67,6 +73,7 @@ def identify(
     client: Any = None,
     held_out: Sequence[str] = (),
     log: Log | None = None,
+    final_models: bool = False,
 ) -> IdentificationResult:
     """Run every stage the dataset allows (partial results from a partial stream).
 
@@ -83,25 +90,32 @@ def identify(
             None: local processes.
         held_out: names of levels kept out of every fit, for validation errors.
         log: progress messages.
+        final_models: the estimation data are complete (the identifier node: every multisine
+            period of the plan is in, sines may still stream): fit the models as the final
+            identification does (the structure scan, the clustering ablation), so that the
+            final call can take them over with ``models_from`` and only validate. ``final``
+            implies it.
     """
     with one_blas_thread():
-        return _identify(dataset, config or IdentificationConfig(), final, models_from,
-                         previous, client, tuple(held_out), log or (lambda _m: None))  # fmt: skip
+        return _identify(dataset, config or IdentificationConfig(), final, final or final_models,
+                         models_from, previous, client, tuple(held_out),
+                         log or (lambda _m: None))  # fmt: skip
 
 
 def _identify(
     dataset: Dataset,
     config: IdentificationConfig,
     final: bool,
+    final_models: bool,
     models_from: IdentificationResult | None,
     previous: IdentificationResult | None,
     client: Any,
     held_out: tuple[str, ...],
     say: Log,
 ) -> IdentificationResult:
-    if final and config.scan and models_from is not None and models_from.scan is None:
-        # The final models come from the structure scan, which the online refits skip: the
-        # multisine data did not change, but the all-levels PNLSS must still be chosen.
+    if final_models and models_from is not None and not models_from.final_models:
+        # The final models come from the structure scan and the ablation, which the online
+        # refits skip: the multisine data did not change, but those stages must still run.
         models_from = None
     unknown = sorted(set(held_out) - {lv.name for lv in dataset.levels})
     if unknown:
@@ -112,6 +126,8 @@ def _identify(
         complete=final,
         source=dataset.source,
         sines_planned=dataset.sines_planned,
+        # Without stages of its own (no scan, no ablation) every refit fits the final models.
+        final_models=final_models or not final_stages(config),
     )
     t_start = time.perf_counter()
     ablation = None
@@ -123,11 +139,13 @@ def _identify(
         # 5 (started here). The clustering ablation, the same pipeline on every valid period,
         # runs in a thread beside steps 3-4: its fits and this one's are independent, and the
         # PNLSS kernels release the GIL, so the final identification uses both cores.
-        ablation = start_ablation(identify, dataset, result, config, final, client, held_out, say)
+        ablation = start_ablation(
+            identify, dataset, result, config, final, final_models, client, held_out, say
+        )
     try:
         if models_from is None:
             # 3. PNLSS on every estimation level, its iterate chosen on their held-out periods.
-            _fit_pnlss_models(dataset, result, config, final, previous, client, say)
+            _fit_pnlss_models(dataset, result, config, final_models, previous, client, say)
         # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
         validate(dataset, result)
         if final and config.bootstrap > 0:
@@ -137,7 +155,9 @@ def _identify(
             wait([ablation])
         raise
     # 5. The ablation's result.
-    _ablation_result(dataset, result, config, final, ablation, models_from, client, held_out, say)
+    _ablation_result(
+        dataset, result, config, final, final_models, ablation, models_from, client, held_out, say
+    )
     _finish(dataset, result, t_start)
     return result
 
@@ -182,12 +202,12 @@ def _fit_pnlss_models(
     dataset: Dataset,
     result: IdentificationResult,
     config: IdentificationConfig,
-    final: bool,
+    final_models: bool,
     previous: IdentificationResult | None,
     client: Any,
     say: Log,
 ) -> None:
-    """The all-levels PNLSS (scanned in the final identification) and the level-1 PNLSS."""
+    """The all-levels PNLSS (scanned for the final models) and the level-1 PNLSS."""
     estimation = [r for r in result.levels.values() if r.role == "estimation"]
     low = estimation[0] if estimation else None
     result.linear_level1 = low.linear if low else None
@@ -199,7 +219,7 @@ def _fit_pnlss_models(
     ]
     if config.pnlss and low is not None and result.linear_level1 is not None and ready:
         result.pnlss_start_level = low.name
-        if final and config.scan:
+        if final_models and config.scan:
             result.scan = scan_levels(ready, result, config, client, say)
             result.pnlss_all = result.scan.best if result.scan is not None else None
         else:
@@ -227,13 +247,15 @@ def _ablation_result(
     result: IdentificationResult,
     config: IdentificationConfig,
     final: bool,
+    final_models: bool,
     ablation: Future[tuple[IdentificationResult, float]] | None,
     models_from: IdentificationResult | None,
     client: Any,
     held_out: tuple[str, ...],
     say: Log,
 ) -> None:
-    """The identification without clustering (final only), and what clustering changed."""
+    """The identification without clustering (final models only), and what clustering
+    changed."""
     if models_from is not None:  # the reused ablation, validated on this dataset
         if result.no_clustering is not None:
             result.no_clustering = identify(
@@ -242,14 +264,14 @@ def _ablation_result(
             )  # fmt: skip
             result.clustering_effect = clustering_effect(result, result.no_clustering)
         return
-    if not (final and config.clustering and config.clustering_ablation):
+    if not (final_models and config.clustering and config.clustering_ablation):
         return
     plain = ablation_config(config)
     if ablation is not None:
         result.no_clustering, result.timings_s["no_clustering"] = ablation.result()
     elif clustering_dropped(result):  # it could not run beside (ablation_beside)
         result.no_clustering, result.timings_s["no_clustering"] = run_ablation(
-            identify, dataset, plain, client, held_out, say
+            identify, dataset, plain, final, client, held_out, say
         )
     else:  # one cluster everywhere: every valid period was used, the same identification
         # (its config has no bootstrap, so neither has it)

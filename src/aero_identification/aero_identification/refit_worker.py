@@ -89,6 +89,7 @@ def refit(
     final: bool,
     out_dir: str,
     reuse_models: bool,
+    final_models: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """One refit: identify (only validate with the kept models if ``reuse_models``) and, when
     final, write the report to ``out_dir``.
@@ -97,6 +98,9 @@ def refit(
         reuse_models: only sine records completed since the last job: the multisine data, hence
             the models, are unchanged (a new worker without kept models fits them afresh, which
             gives the same models).
+        final_models: every multisine period of the plan is in: fit the final identification's
+            models now (pipeline.identify's ``final_models``), so that the final job only
+            validates them.
 
     Returns:
         (payload, summary): the /identification/model payload (pipeline's ``to_json_dict``)
@@ -120,6 +124,7 @@ def refit(
         final=final,
         models_from=last if reuse_models else None,
         previous=last,
+        final_models=final_models,
     )
     _kept["last"] = result
     written: list[str] = []

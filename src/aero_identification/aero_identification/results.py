@@ -148,6 +148,9 @@ class IdentificationResult:
     warnings: list[str] = field(default_factory=list)
     timings_s: dict[str, float] = field(default_factory=dict)
     complete: bool = False
+    # Fitted with the final identification's stages (pipeline.identify's final_models): a
+    # final call on the same multisine data may take the models over and only validate.
+    final_models: bool = False
     level1_signature: bytes = b""  # which level-1 periods the level-1 PNLSS was trained on
     excluded_sines: list[str] = field(default_factory=list)
     data_quality: dict[str, Any] = field(default_factory=dict)  # the dataset's account

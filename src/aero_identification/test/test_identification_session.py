@@ -96,13 +96,25 @@ def _end(segment: Any) -> dict[str, Any]:
     return segment_event(segment, "end", T0 / 1e9, PLAN.fs)
 
 
-def _stub_refit(calls: list[tuple[bool, bool]], complete_when_final: bool = True) -> Any:
-    """refit_worker.refit's stand-in: records (final, reuse), answers what a refit answers."""
+def _stub_refit(
+    calls: list[tuple[bool, bool]],
+    complete_when_final: bool = True,
+    final_models: list[bool] | None = None,
+) -> Any:
+    """refit_worker.refit's stand-in: records (final, reuse) in ``calls`` and each job's
+    final_models in ``final_models``, answers what a refit answers."""
 
     def refit(
-        assembler: CampaignAssembler, config: Any, final: bool, out_dir: str, reuse: bool
+        assembler: CampaignAssembler,
+        config: Any,
+        final: bool,
+        out_dir: str,
+        reuse: bool,
+        fit_final_models: bool = False,
     ) -> tuple[dict[str, Any], dict[str, Any]]:
         calls.append((final, reuse))
+        if final_models is not None:
+            final_models.append(fit_final_models)
         complete = final and complete_when_final
         summary = {
             "complete": complete,
@@ -279,6 +291,66 @@ def test_refits_start_when_their_data_are_in_and_the_final_one_stops_the_node(
     session.on_timer()
     assert session.final_done and outputs.stops == [0]
     assert session.status([])[1]["state"] == "done"
+
+
+@pytest.mark.parametrize("anomaly_meanwhile", [False, True])
+def test_once_every_multisine_period_is_in_its_refit_fits_the_final_models(
+    monkeypatch: pytest.MonkeyPatch, caplog: Any, anomaly_meanwhile: bool
+) -> None:
+    calls: list[tuple[bool, bool]] = []
+    final_models: list[bool] = []
+    monkeypatch.setattr(refit_worker, "refit", _stub_refit(calls, final_models=final_models))
+    outputs = Outputs()
+    session = _session(outputs)
+    session.on_plan(plan_message(PLAN, T0))
+    multisines = [s for s in PLAN.segments if s.kind == "multisine"]
+    last = multisines[-1]
+    before = [s for s in multisines if (s.level, s.realization) != (last.level, last.realization)][
+        -1
+    ]
+    end_k = last.start_k + last.length - 1
+    assert session.intake.assembler is not None
+    assert end_k == session.intake.assembler.multisine_end_k < PLAN.total_samples - 1
+    # A realization before the last: an online refit.
+    _feed(session, range(before.start_k + before.length))
+    session.on_segment(_end(before))
+    session.on_timer()
+    session.on_timer()
+    assert final_models == [False]
+    # The last one: the final models, fitted while the sines after it stream.
+    _feed(session, range(before.start_k + before.length, end_k + 1))
+    session.on_segment(_end(last))
+    with caplog.at_level(logging.INFO, logger=LOGGER):
+        session.on_timer()
+    assert calls[-1] == (False, False) and final_models[-1] is True
+    assert caplog.records[-1].getMessage().endswith("complete) [final models]")
+    if anomaly_meanwhile:  # may exclude periods those models were fitted on
+        session.on_anomaly(Anomaly("lift/invalid/1", "lift", "invalid", _stamp(5), None).to_json())
+    session.on_timer()  # collects it
+    assert session.schedule.models_stale is anomaly_meanwhile
+    # The plan's end: the final identification validates those models, or fits afresh.
+    _feed(session, range(end_k + 1, PLAN.total_samples))
+    session.on_segment({"event": "plan_end", "samples": PLAN.total_samples})
+    session.on_timer()
+    assert calls[-1] == (True, anomaly_meanwhile is False) and final_models[-1] is False
+    session.on_timer()
+    assert session.final_done and outputs.stops == [0]
+
+
+def test_an_adaptive_run_fits_no_final_models_before_its_end(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Its plan may still grow: a realization may be added after the last one planned."""
+    calls: list[tuple[bool, bool]] = []
+    final_models: list[bool] = []
+    monkeypatch.setattr(refit_worker, "refit", _stub_refit(calls, final_models=final_models))
+    session = _session(Outputs(), adaptive=True)
+    session.on_plan(plan_message(PLAN, T0))
+    last = [s for s in PLAN.segments if s.kind == "multisine"][-1]
+    _feed(session, range(last.start_k + last.length))
+    session.on_segment(_end(last))
+    session.on_timer()
+    assert calls == [(False, False)] and final_models == [False]
 
 
 def test_a_dead_worker_is_replaced_and_its_job_queued_again() -> None:
