@@ -400,16 +400,30 @@ def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_i
 def test_identifier_killed_in_its_final_identification_is_recovered_from_the_bag(
     small_plan: Path, small_campaign, tmp_path: Path
 ) -> None:
-    """kill -9 of the identifier after the plan's end, once its final refit has started: the
-    graph stops, the bag holds the whole plan, so the campaign runs the final identification
-    from it: exit 0, Table 1 byte-identical to the idle run, the recovery and its reason said."""
+    """kill -9 of the identifier after the plan's end, before its final identification is
+    done: the graph stops, the bag holds the whole plan, so the campaign runs the final
+    identification from it: exit 0, Table 1 byte-identical to the idle run, the recovery and
+    its reason said. The identifier's worker is held (SIGSTOP) in the final models' fit, which
+    starts before the plan's end, so the kill comes while the final identification waits for
+    it, however fast the machine."""
     run = tmp_path / "run"
+
+    def hold_the_fit_then_kill(identifier: Any) -> None:
+        (worker,) = [c for c in identifier.children() if "spawn_main" in " ".join(c.cmdline())]
+        worker.suspend()
+        try:
+            log = run / "logs" / "identifier.log"
+            assert wait_for(lambda: "final identification's data are in" in log.read_text(), 300)
+            identifier.kill()
+        finally:
+            worker.kill()
+
     code, out, err = _campaign_with_fault(
         run,
         "identifier",
-        "[final]",
+        "[final models]",
         "identifier",
-        lambda target: target.kill(),
+        hold_the_fit_then_kill,
         *WING,
         plan=str(small_plan),
     )

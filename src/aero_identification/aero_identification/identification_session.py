@@ -380,6 +380,7 @@ class IdentificationSession:
         self.last_summary: dict[str, Any] | None = None
         self.errors: list[str] = []
         self.final_done = False
+        self.final_waits_said = False  # logged once: the final's data are in, a refit runs
 
     # -- intake ---------------------------------------------------------------------------
     def on_plan(self, text: str) -> None:
@@ -457,6 +458,13 @@ class IdentificationSession:
         if self.judge is not None and asm is not None:
             while (item := self.judge.next_ready(self.intake.have)) is not None:
                 self.send_verdicts(asm, item)
+        if self.job is not None and not self.final_waits_said:
+            if any(r.final and r.needed_k <= self.intake.have for r in self.schedule.pending):
+                self.final_waits_said = True
+                self.logger.info(
+                    "the final identification's data are in: it starts when refit %d is done",
+                    self.refits + 1,
+                )
         if self.job is not None or asm is None:
             return
         ready = self.schedule.take_ready(self.intake.have)

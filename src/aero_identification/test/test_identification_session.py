@@ -337,6 +337,23 @@ def test_once_every_multisine_period_is_in_its_refit_fits_the_final_models(
     assert session.final_done and outputs.stops == [0]
 
 
+def test_a_final_identification_waiting_for_a_running_refit_says_so_once(
+    stubbed: tuple[IdentificationSession, Outputs, list[Any]], caplog: Any
+) -> None:
+    session, outputs, calls = stubbed
+    session.job = RefitJob(Future(), "level 1 realization 1 complete", False, time.monotonic(), 0)
+    session.on_segment({"event": "plan_end", "samples": PLAN.total_samples})
+    with caplog.at_level(logging.INFO, logger=LOGGER):
+        _feed(session, range(PLAN.total_samples - 1))
+        session.on_timer()  # its data are not all in
+        _feed(session, [PLAN.total_samples - 1])
+        session.on_timer()
+        session.on_timer()
+    said = [r.getMessage() for r in caplog.records if "final identification" in r.getMessage()]
+    assert said == ["the final identification's data are in: it starts when refit 1 is done"]
+    assert calls == [] and not session.final_done and outputs.stops == []
+
+
 def test_an_adaptive_run_fits_no_final_models_before_its_end(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
