@@ -13,17 +13,19 @@ process timestamps the arrival of each /pitch/command sample and of its /wing/co
 sample (same stamp): end-to-end latency p50/p99.
 
     .venv/bin/python bench/graph.py [--plan short] [--latency-seconds 20] [--view]
-    .venv/bin/python bench/graph.py --campaign [--before TREE] [--view]
+    .venv/bin/python bench/graph.py --campaign [--before TREE] [--view] [--real-time-factor X]
 
 ``--campaign`` runs ``aero-rig campaign --plan default`` as a user does (asynchronous Fast DDS
 publication, no view) and splits its wall time, from the node logs, into the start (processes
 up, start barrier), streaming (barrier to the generator's plan end) and the final
 identification (plan end to the report). ``--before TREE`` first runs the same campaign with the
 code of another checkout (its ``src/*`` on PYTHONPATH, this venv), so that before and after are
-measured in one run, and compares their tables byte for byte. With ``--view`` the campaign runs
-with ``--rerun save``: ``view`` gives what the view missed against the plan (its last report:
-pitch and C_l samples, tap frames drawn) and ``rrd_rows`` the rows of each entity path of the
-finished ``campaign.rrd``, read back with Rerun's reader.
+measured in one run, and compares their tables byte for byte. ``--real-time-factor X`` paces
+the campaign (``aero-rig campaign --real-time-factor X``): then the final identification's
+split says how long after the plan's end a paced run's report comes. With ``--view`` the
+campaign runs with ``--rerun save``: ``view`` gives what the view missed against the plan (its
+last report: pitch and C_l samples, tap frames drawn) and ``rrd_rows`` the rows of each entity
+path of the finished ``campaign.rrd``, read back with Rerun's reader.
 
 Last line: JSON {"rclpy": {...}} (or {"before": ..., "after": ..., "tables_identical": ...}
 with ``--campaign``), with real_time_factor, wall_s, samples, samples_lost,
@@ -211,6 +213,12 @@ def main() -> int:
     parser.add_argument("--view", action="store_true", help="run the Rerun view node beside it")
     parser.add_argument("--campaign", action="store_true", help="the default campaign's split")
     parser.add_argument("--before", default=None, help="with --campaign: a checkout to compare")
+    parser.add_argument(
+        "--real-time-factor",
+        type=float,
+        default=0.0,
+        help="with --campaign: experiment s per wall s (0: as fast as the graph takes)",
+    )
     args = parser.parse_args()
     if args.campaign:
         return compare_campaigns(args)
@@ -280,14 +288,18 @@ def view_figures(run_dir: Path) -> dict[str, Any]:
     }
 
 
-def run_campaign(run_dir: Path, tree: Path | None, view: bool = False) -> dict[str, Any]:
-    """``aero-rig campaign --plan default`` (this checkout, or ``tree``'s code), timed; with
-    ``view``, ``--rerun save`` and what the view missed."""
+def run_campaign(
+    run_dir: Path, tree: Path | None, view: bool = False, real_time_factor: float = 0.0
+) -> dict[str, Any]:
+    """``aero-rig campaign --plan default`` (this checkout, or ``tree``'s code), timed, at
+    ``real_time_factor`` (0: as fast as the graph takes); with ``view``, ``--rerun save`` and
+    what the view missed."""
     env = dict(os.environ)
     if tree is not None:
         env["PYTHONPATH"] = os.pathsep.join(str(p) for p in sorted((tree / "src").glob("*")))
     cmd = [str(Path(sys.executable).with_name("aero-rig")), "campaign", "--plan", "default"]
     cmd += ["--rerun", "save"] if view else []
+    cmd += ["--real-time-factor", str(real_time_factor)]
     started = time.time()
     proc = subprocess.run([*cmd, "--out", str(run_dir), "--quiet"], env=env, text=True,
                           capture_output=True, timeout=3600)  # fmt: skip
@@ -313,7 +325,7 @@ def compare_campaigns(args: argparse.Namespace) -> int:
         runs.append(("after", None))
         for name, tree in runs:
             print(f"== {name}: aero-rig campaign --plan default ({tree or 'this checkout'})")
-            results[name] = run_campaign(base / name, tree, args.view)
+            results[name] = run_campaign(base / name, tree, args.view, args.real_time_factor)
             print(json.dumps(results[name]))
         if args.before:
             results["tables_identical"] = {t: _same_file(base / "before" / t, base / "after" / t)
