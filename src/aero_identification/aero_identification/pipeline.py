@@ -12,9 +12,10 @@ Every stage runs that the data allow, each in its own module:
 3. pnlss_training.py: one PNLSS model over every estimation level ("all levels";
    [PitchingWing] §4.1), started from the lowest level's linear model, trained on one mean
    period per level and training realization and choosing its iterate on held-out periods of
-   the same levels (`pnlss_sets`); with ``config.scan`` (final identification) the
-   cross-validated structure scan chooses its structure; and, when the source plans sines, the
-   paper's "level 1" PNLSS trained on the lowest level alone;
+   the same levels (`pnlss_sets`); with ``config.scan`` (the final models: the final
+   identification, or ``final_models``) the cross-validated structure scan chooses its
+   structure; and, when the source plans sines, the paper's "level 1" PNLSS trained on the
+   lowest level alone;
 4. validation.py: validation on the single sines (Table 1: relative RMS error
    rms(y − ŷ)/rms(y − mean y); BLA FRF and BLA SS centred on the record's measured means,
    PNLSS absolute; each cell's ± is the std over the sine's periods of the per-period error,
@@ -22,8 +23,12 @@ Every stage runs that the data allow, each in its own module:
    any fit, so their errors are test errors); bootstrap.py: with ``config.bootstrap`` (final
    only) each cell's estimation spread, the std over refits on bootstrap replicates of the
    estimation periods;
-5. clustering_ablation.py: with ``config.clustering_ablation`` (final only), the same
-   pipeline without clustering, and what clustering changed.
+5. clustering_ablation.py: with ``config.clustering_ablation`` (the final models only), the
+   same pipeline without clustering, and what clustering changed.
+
+The final models (the scan of stage 3, and stage 5) can be fitted before the final call, once the
+estimation data are complete (``final_models``); the final call then takes them over with
+``models_from`` and only validates (the identifier node does this while its last sines stream).
 
 Models are simulated in periodic steady state (the record's last period is prepended and
 dropped), like the measured data.
