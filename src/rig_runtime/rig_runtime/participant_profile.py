@@ -75,10 +75,28 @@ def _locator(address: str | None) -> str:
     return f"<locator><udpv4>{inner}</udpv4></locator>"
 
 
+# SPDP announcements (Fast DDS ``initialAnnouncements`` and ``leaseAnnouncement``): ten at
+# 100 ms, then one a second, where Fast DDS 2.14 sends five at 100 ms, then one every 3 s. A
+# participant learns of one that it did not hear announce within its first 0.5 s, or that did
+# not hear it, only at one of these periodic announcements. A graph's processes start over a
+# few seconds (imports, a plant's tables), so with Fast DDS's timing the start barrier waited up
+# to 3 s for the last pairs of endpoints to match; now at most a second. The lease (how long a
+# silent participant stays matched) is Fast DDS's, ros_environment.PARTICIPANT_LEASE_S.
+ANNOUNCEMENTS = (
+    "<discovery_config>"
+    "<initialAnnouncements><count>10</count>"
+    "<period><sec>0</sec><nanosec>100000000</nanosec></period></initialAnnouncements>"
+    "<leaseAnnouncement><sec>1</sec><nanosec>0</nanosec></leaseAnnouncement>"
+    "</discovery_config>"
+)
+
+
 def participant_xml(range_: str, peers: list[str]) -> str:
     """The default participant profile for ``range_`` (LOCALHOST or SUBNET) and the static peers'
-    IPv4 addresses: what rmw_fastrtps configures for them, with UDPv4 as the only transport."""
-    builtin = []
+    IPv4 addresses: what rmw_fastrtps configures for them, with UDPv4 as the only transport, and
+    announcements that let a graph started over a few seconds match within about a second
+    (ANNOUNCEMENTS)."""
+    builtin = [ANNOUNCEMENTS]
     initial = list(peers)
     if range_ == "LOCALHOST":
         # No multicast discovery: a unicast metatraffic locator keeps Fast DDS from adding its

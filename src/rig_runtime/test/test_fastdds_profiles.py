@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from rig_runtime.participant_profile import PROFILES_ENV, PROFILES_FILE
+from rig_runtime.participant_profile import PROFILES_ENV, PROFILES_FILE, profiles_xml
 from rig_runtime.testing import graph_env
 
 # A participant and a writer made with the file as Fast DDS's default profiles.
@@ -42,6 +42,16 @@ def test_fast_dds_parses_the_profile_file() -> None:
     assert "<max_blocking_time><sec>60</sec></max_blocking_time>" in text
     assert "<heartbeatPeriod><sec>0</sec><nanosec>100000000</nanosec></heartbeatPeriod>" in text
     assert "XMLPARSER" not in _output_of_a_writer(PROFILES_FILE)
+
+
+def test_fast_dds_parses_the_participant_profiles(tmp_path: Path) -> None:
+    """The files participant_profile writes for the UDP ranges: the transport, the discovery
+    peers and the announcements' timing."""
+    for range_, peers in (("LOCALHOST", []), ("SUBNET", ["10.0.0.7"])):
+        profile = tmp_path / f"{range_}.xml"
+        profile.write_text(profiles_xml(range_, peers))
+        assert "<initialAnnouncements>" in profile.read_text()
+        assert "XMLPARSER" not in _output_of_a_writer(profile), range_
 
 
 def test_a_profile_file_fast_dds_rejects_is_seen(tmp_path: Path) -> None:

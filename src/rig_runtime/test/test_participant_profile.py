@@ -47,6 +47,21 @@ def test_subnet_keeps_multicast_discovery_and_adds_peers() -> None:
     assert f"<initialPeersList>{peers}</initialPeersList>" in with_peer
 
 
+def test_participants_announce_ten_times_at_first_then_every_second() -> None:
+    # Fast DDS's own timing (five announcements in 0.5 s, then one every 3 s) made a graph
+    # started over a few seconds wait up to 3 s for its last pairs to match (bench/discovery.py).
+    for xml in (participant_xml("LOCALHOST", []), participant_xml("SUBNET", ["10.0.0.7"])):
+        builtin = xml.split("<builtin>")[1].split("</builtin>")[0]
+        assert builtin.count("<discovery_config>") == 1
+        assert (
+            "<initialAnnouncements><count>10</count><period><sec>0</sec>"
+            "<nanosec>100000000</nanosec></period></initialAnnouncements>"
+        ) in builtin
+        assert "<leaseAnnouncement><sec>1</sec><nanosec>0</nanosec></leaseAnnouncement>" in builtin
+        # the lease itself stays Fast DDS's (ros_environment.PARTICIPANT_LEASE_S)
+        assert "leaseDuration>" not in builtin
+
+
 def test_the_profile_adds_the_participant_to_the_writers_settings() -> None:
     text = profiles_xml("LOCALHOST", [])
     assert text.startswith(PROFILES_FILE.read_text().split("</profiles>")[0])
