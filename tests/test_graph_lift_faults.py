@@ -1,8 +1,8 @@
 """Lift node faults through DDS: missing taps, uncovered surfaces, taps ahead of their pitch.
 
 The test process plays the actuator and the scanner: it publishes ``/pitch/state`` and
-``/pressure/taps`` (the WingPlant's pressures at a fixed α) and reads ``/wing/coefficients``
-and ``/diagnostics`` of the ``lift`` node running as a process.
+``/pressure/taps`` (the WingPlant's pressures at a fixed α) and reads ``/wing/coefficients``,
+``/wing/coefficients/progress`` and ``/diagnostics`` of the ``lift`` node running as a process.
 """
 
 import math
@@ -17,7 +17,13 @@ from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 from pressure_scanner.integration import PressureIntegrator
 from pressure_scanner.tap_cloud import fill_cloud
 from pressure_scanner.taps import load_taps
-from rig_runtime.interface import PITCH_JOINT, PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
+from rig_runtime.interface import (
+    PITCH_JOINT,
+    PITCH_STATE,
+    PRESSURE_TAPS,
+    WING_COEFFICIENTS,
+    WING_PROGRESS,
+)
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph
@@ -38,11 +44,18 @@ class LiftClient:
             PRESSURE_TAPS.type, PRESSURE_TAPS.name, PRESSURE_TAPS.qos
         )
         self.out: list[tuple[int, np.ndarray]] = []
+        self.progress: list[int] = []  # the stamps /wing/coefficients/progress carried
         self.diagnostics: list[dict[str, str]] = []
         self.peers = PeerReaders(self.node)
         self.subs = [
             self.node.create_subscription(
                 WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, self._on_out, WING_COEFFICIENTS.qos
+            ),
+            self.node.create_subscription(
+                WING_PROGRESS.type,
+                WING_PROGRESS.name,
+                lambda msg: self.progress.append(stamp_to_ns(msg.stamp)),
+                WING_PROGRESS.qos,
             ),
             subscribe_diagnostics(self.node, "pressure integration", self.diagnostics),
         ]
@@ -85,6 +98,9 @@ class LiftClient:
 
     def wait_outputs(self, n: int, timeout_s: float = 10.0) -> bool:
         return self.node.spin_until(lambda: len(self.out) >= n, timeout_s)
+
+    def wait_progress(self, stamp: int, timeout_s: float = 10.0) -> bool:
+        return self.node.spin_until(lambda: stamp in self.progress, timeout_s)
 
     def wait_diagnostics(self, predicate: Any, timeout_s: float = 10.0) -> dict[str, str]:
         return wait_diagnostics(self.node, self.diagnostics, predicate, timeout_s)
@@ -200,3 +216,27 @@ def test_taps_ahead_of_their_pitch_wait_for_it(lift: Any, wing_pressures: np.nda
     assert diag["pending"] == "0"
     assert diag["alpha_missing"] == "0"
     assert diag["invalid"] == "0"
+
+
+def test_the_progress_carries_the_latest_published_stamp(
+    lift: Any, wing_pressures: np.ndarray
+) -> None:
+    """The generator's credit (multisine_gen.pacing): the stamp of the last coefficients sample
+    published, never of taps still waiting for their pitch."""
+    client, procs = lift
+    alpha = math.radians(ALPHA_DEG)
+    client.publish_state(0, alpha)
+    client.publish_taps(0, wing_pressures)
+    assert client.wait_progress(client.stamp(0)), procs.log("lift")
+    for k in range(1, 4):
+        client.publish_taps(k, wing_pressures)
+    client.wait_diagnostics(lambda d: d.get("pending") == "3")
+    client.node.spin_until(lambda: len(client.progress) > 1, 0.5)  # a report would show now
+    assert client.progress == [client.stamp(0)], "progress past what was published"
+    for k in range(1, 4):
+        client.publish_state(k, alpha)
+    assert client.wait_progress(client.stamp(3)), procs.log("lift")
+    assert client.wait_outputs(4)
+    published = {s for s, _ in client.out}
+    assert set(client.progress) <= published
+    assert client.progress == sorted(set(client.progress)), "a stamp again, or out of order"

@@ -5,8 +5,8 @@ sample with stamps t0 + k/fs, the whole plan as JSON on ``/experiment/plan`` (la
 event per segment start/end on ``/experiment/segment``. Pacing: the wall clock times
 ``real_time_factor`` (1 on the rig; 0 = as fast as the graph takes). With ``flow_control`` the
 generator never runs more than ``max_lead_samples`` ahead of the last ``/wing/coefficients``
-stamp it has seen, a credit that makes a simulated run lossless and deterministic whatever the
-speed (pacing.py).
+stamp the lift reports on ``/wing/coefficients/progress``, a credit that makes a simulated run
+lossless and deterministic whatever the speed (pacing.py).
 
 Start barrier (rig_runtime.barrier): t0 is taken, and the plan published, only when every node
 named in ``barrier_nodes`` (filled in from the graph description by rig-launch, aero-rig and the
@@ -55,7 +55,7 @@ from rig_runtime.interface import (
     GRAPH_READY,
     PITCH_COMMAND,
     PITCH_JOINT,
-    WING_COEFFICIENTS,
+    WING_PROGRESS,
     ActuatorLimits,
 )
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
@@ -78,7 +78,11 @@ PARAMETERS = [
         min=0.0,
         max=1000.0,
     ),
-    Parameter("flow_control", True, "wait for /wing/coefficients (simulation); false on the rig"),
+    Parameter(
+        "flow_control",
+        True,
+        "wait for the lift's /wing/coefficients/progress (simulation); false on the rig",
+    ),
     Parameter("max_lead_samples", 1000, "most samples ahead of the last coefficients", min=1),
     Parameter("wait_for_subscribers", 1, "command subscribers to wait for before t0", min=0),
     Parameter(
@@ -186,10 +190,10 @@ class Generator:
         self.barrier_logged = time.monotonic()
         if p["flow_control"]:
             node.create_subscription(
-                WING_COEFFICIENTS.type,
-                WING_COEFFICIENTS.name,
-                self.on_coefficients,
-                WING_COEFFICIENTS.qos,
+                WING_PROGRESS.type,
+                WING_PROGRESS.name,
+                self.on_progress,
+                WING_PROGRESS.qos,
                 required=True,
             )
         node.create_subscription(
@@ -316,10 +320,11 @@ class Generator:
             return False
         return True
 
-    def on_coefficients(self, msg: Any) -> None:
+    def on_progress(self, msg: Any) -> None:
+        """The lift's latest coefficients stamp (std_msgs/Header): the credit."""
         if self.t0_ns is None:
             return
-        self.pacer.credit(round((stamp_to_ns(msg.header.stamp) - self.t0_ns) * self.fs / 1e9))
+        self.pacer.credit(round((stamp_to_ns(msg.stamp) - self.t0_ns) * self.fs / 1e9))
 
     def on_ready(self, msg: Any) -> None:
         try:

@@ -5,9 +5,10 @@ Two limits, either or both (docs/design.md §5):
 - **Wall clock**: at ``real_time_factor`` r > 0, sample k is due once ``k / (r·fs)`` wall seconds
   have passed since t0 (the rig runs at r = 1).
 - **Credit** (simulation, ``flow_control``): never more than ``max_lead`` samples ahead of the
-  last sample whose ``/wing/coefficients`` came back. The simulated stream is as fast as the
-  graph takes, and what is in flight is bounded: a slow or paused node stalls the generator
-  instead of piling samples up in front of it, and nothing is lost.
+  last sample whose ``/wing/coefficients`` the lift has published (it reports their stamps on
+  ``/wing/coefficients/progress`` every few milliseconds). The simulated stream is as fast as
+  the graph takes, and what is in flight is bounded: a slow or paused node stalls the
+  generator instead of piling samples up in front of it, and nothing is lost.
 
 Plain logic with explicit times, tested in-process; the node only feeds it.
 """
@@ -29,7 +30,8 @@ class StreamPacer:
         self.wall0 = wall_s
 
     def credit(self, k: int) -> None:
-        """The coefficients of plan sample k came back (out-of-order returns are harmless)."""
+        """The coefficients of plan sample k were published (out-of-order reports are
+        harmless)."""
         self.k_seen = max(self.k_seen, k)
 
     @property

@@ -2,7 +2,7 @@
 request it carries out becomes a published plan revision and a decision event; one it cannot,
 or a malformed message, is logged and recorded as refused and changes nothing; in simulation
 the stream holds at a measured period's end until that period's request, while a controller is
-matched."""
+matched. Its credit (flow control) comes from the lift's progress stamps."""
 
 import json
 import logging
@@ -14,7 +14,8 @@ import pytest
 from multisine_gen.generator_node import PARAMETERS, Generator
 from multisine_gen.plan_format import read_plan_message
 from multisine_gen.revision import PlanRequest
-from rig_runtime.messages import new_message
+from rig_runtime.interface import WING_COEFFICIENTS, WING_PROGRESS
+from rig_runtime.messages import new_message, set_stamp
 
 
 class _Endpoint:
@@ -170,3 +171,21 @@ def test_the_hold_waits_for_the_last_request_on_a_period() -> None:
     _send(gen, PlanRequest("add_realization", 1, p1.stop_k - 1, "total variance -6 dB"))
     assert gen.plan.revision == 2 and not gen._holds(p1.stop_k)
     assert next(lv for lv in gen.plan.levels if lv.level == 1).realization_periods == (4, 2, 4)
+
+
+def test_the_credit_comes_from_the_lifts_progress_stamps() -> None:
+    gen, node = _started(max_lead_samples=50)
+    assert f"sub {WING_PROGRESS.name}" in node.endpoints
+    assert f"sub {WING_COEFFICIENTS.name}" not in node.endpoints  # not every sample
+    commands = node.endpoints["/pitch/command"].sent
+    gen.tick()
+    assert len(commands) == 50  # nothing came back yet: the lead alone
+    progress = new_message(WING_PROGRESS.type, frame_id="wing")
+    set_stamp(progress.stamp, gen.stamp_ns(29))
+    gen.on_progress(progress)
+    gen.tick()
+    assert len(commands) == 80  # samples 0..29 published by the lift, and 50 ahead
+    set_stamp(progress.stamp, gen.stamp_ns(10))  # an older report takes nothing back
+    gen.on_progress(progress)
+    gen.tick()
+    assert len(commands) == 80

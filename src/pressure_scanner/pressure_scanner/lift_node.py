@@ -8,6 +8,10 @@ neighbouring states on the rig, within ``max_alpha_gap_s``). Taps that are NaN o
 scanner range are excluded; a sample whose remaining taps do not cover the surface is invalid
 and published as NaN, never as a number. Exclusions are counted on ``/diagnostics``; each run of
 NaN samples is one ``invalid_coefficients`` anomaly on ``/experiment/anomaly``.
+
+Every ``PROGRESS_PERIOD_S`` in which it published coefficients, it publishes the stamp of the
+latest on ``/wing/coefficients/progress`` (std_msgs/Header): a simulated stream's generator
+takes its credit from it (multisine_gen.pacing) instead of reading every coefficients sample.
 """
 
 import math
@@ -24,6 +28,7 @@ from rig_runtime.interface import (
     PITCH_STATE,
     PRESSURE_TAPS,
     WING_COEFFICIENTS,
+    WING_PROGRESS,
     joint_position,
 )
 
@@ -52,6 +57,9 @@ PARAMETERS = [
 ]
 
 HISTORY = 4000
+# Period of /wing/coefficients/progress [s]: at the simulation's full speed (about 5,000 samples
+# a second) a credit every 25 samples or so, far inside the generator's lead (1,000 samples).
+PROGRESS_PERIOD_S = 0.005
 
 
 def gap_ns(seconds: float) -> int:
@@ -78,6 +86,11 @@ class Lift:
         self.excluded_per_tap = np.zeros(self.n_taps, dtype=np.int64)
         self.last_reason = ""
         self.pub = node.create_publisher(WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, p["qos"])
+        self.progress_pub = node.create_publisher(
+            WING_PROGRESS.type, WING_PROGRESS.name, WING_PROGRESS.qos
+        )
+        self.latest_stamp: Any = None  # of the last coefficients sample published
+        self.progress_stamp: Any = None  # the last one /wing/coefficients/progress carried
         self.diag = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name)
         node.create_subscription(
             PITCH_STATE.type, PITCH_STATE.name, self.on_pitch, p["qos"], required=True
@@ -86,6 +99,7 @@ class Lift:
             PRESSURE_TAPS.type, PRESSURE_TAPS.name, self.on_taps, p["qos"], required=True
         )
         node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
+        node.create_timer(PROGRESS_PERIOD_S, self.publish_progress)
 
     def on_pitch(self, msg: Any) -> None:
         # A state without a finite pitch still takes its stamp: the taps at that stamp are
@@ -127,6 +141,15 @@ class Lift:
         out.vector.x, out.vector.y, out.vector.z = cl, cd, cm
         self.pub.publish(out)
         self.counts["published"] += 1
+        self.latest_stamp = out.header.stamp
+
+    def publish_progress(self) -> None:
+        if self.latest_stamp is None or self.latest_stamp is self.progress_stamp:
+            return
+        self.progress_stamp = self.latest_stamp
+        self.progress_pub.publish(
+            self.node.new_message(WING_PROGRESS.type, stamp=self.latest_stamp, frame_id="wing")
+        )
 
     def publish_diagnostics(self) -> None:
         excluded = {
@@ -150,6 +173,7 @@ class Lift:
     def close(self) -> None:
         for stamp, taps, alpha in self.alignment.flush():
             self._process(stamp, taps, alpha)
+        self.publish_progress()
         self.publish_diagnostics()
 
 

@@ -39,6 +39,7 @@ __all__ = [
     "RECORDED_TOPICS",
     "TOPICS",
     "WING_COEFFICIENTS",
+    "WING_PROGRESS",
     "ActuatorLimits",
     "LimitsError",
     "Topic",
@@ -85,6 +86,13 @@ WING_COEFFICIENTS = Topic(
     "geometry_msgs/msg/Vector3Stamped",
     "stream",
     "x = C_l, y = C_d (pressure drag), z = C_m,c/4 by pressure integration, stamped as the taps",
+)
+WING_PROGRESS = Topic(
+    "/wing/coefficients/progress",
+    "std_msgs/msg/Header",
+    "default",
+    "the stamp of the lift's latest /wing/coefficients sample, at most every 5 ms: the credit "
+    "of a simulated stream's flow control (multisine_gen.pacing)",
 )
 EXPERIMENT_PLAN = Topic(
     "/experiment/plan",
@@ -143,6 +151,7 @@ TOPICS: tuple[Topic, ...] = (
     PRESSURE_TAPS,
     PRESSURE_TARE,
     WING_COEFFICIENTS,
+    WING_PROGRESS,
     EXPERIMENT_PLAN,
     EXPERIMENT_SEGMENT,
     EXPERIMENT_CONTROL,
@@ -155,10 +164,10 @@ TOPICS: tuple[Topic, ...] = (
 
 # What a run records (the recorder's `topics` in config/recorder.yaml, and the ROS launch
 # files' `record:=true`): the experiment's data, what the offline fit must exclude, the
-# identifier's results and the diagnostics. Commands to the rig (stop, tare) and the start
-# barrier's reports are not data.
+# identifier's results and the diagnostics. Commands to the rig (stop, tare), the lift's
+# progress (the coefficients' stamps again) and the start barrier's reports are not data.
 RECORDED_TOPICS: tuple[Topic, ...] = tuple(
-    t for t in TOPICS if t not in (PITCH_STOP, PRESSURE_TARE, GRAPH_READY)
+    t for t in TOPICS if t not in (PITCH_STOP, PRESSURE_TARE, WING_PROGRESS, GRAPH_READY)
 )
 
 # Joint names in sensor_msgs/JointState.

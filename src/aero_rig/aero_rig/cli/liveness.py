@@ -159,8 +159,8 @@ class Liveness:
             )
             if self.stream_state == "waiting for credit":
                 what += (
-                    "; it waits for /wing/coefficients, which the actuator, the wing and the "
-                    "lift return"
+                    "; it waits for the lift's /wing/coefficients/progress, which comes as the "
+                    "actuator, the wing and the lift return coefficients"
                 )
         pitch, cl = self.samples
         return (
