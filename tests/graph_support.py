@@ -270,6 +270,7 @@ def two_host_campaign(
     cli += ["--host", WORKSTATION, "--out", str(run), "--quiet", "--timeout", str(timeout_s)]
     rig = start_session(lab.command(RIG, rig_cmd), lab_env(lab, RIG, base_env, static_peers))
     fault_at = None
+    ended_early = False
     try:
         started = time.time()
         proc = start_session(
@@ -285,9 +286,10 @@ def two_host_campaign(
                     ),
                     timeout_s,
                 )
-                assert held and proc.poll() is None, "the campaign ended before the fault"
-                fault_at = time.time()
-                during(proc)
+                ended_early = not held or proc.poll() is not None
+                if not ended_early:
+                    fault_at = time.time()
+                    during(proc)
         finally:
             out, err = finish(proc, timeout_s + 120)
         wall = time.time() - started
@@ -295,6 +297,14 @@ def two_host_campaign(
         if rig.poll() is None:
             os.killpg(rig.pid, signal.SIGINT)
         rig_out, rig_err = finish(rig, 60)
+    if ended_early:  # what the campaign and the rig said, and the graph at a stall
+        summary = run / "campaign.json"
+        state = json.loads(summary.read_text()).get("flow_at_stall") if summary.exists() else None
+        raise AssertionError(
+            f"the campaign ended before the fault (exit {proc.returncode}):\n{err[-4000:]}\n"
+            f"rig (exit {rig.returncode}):\n{(rig_out + rig_err)[-3000:]}\n"
+            f"flow_at_stall: {json.dumps(state, indent=1)}"
+        )
     return TwoHostRun(
         proc.returncode, out, err, rig.returncode, rig_out + rig_err, wall, started, fault_at
     )

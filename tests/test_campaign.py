@@ -390,8 +390,15 @@ def test_a_stream_node_stopped_for_good_ends_the_run_at_the_stall_bound_naming_i
     assert "stream stalled before the plan's end" in err and "timeout after" not in err
     assert re.search(r"stopped \(SIGSTOP, job control or a debugger\): lift \(\d+ s\)", err), err
     assert bound <= ended_after, ended_after  # never before the bound (the bench times the rest)
+    # the flow reports at the stall: the lift silent since it was stopped, the others heard
+    assert re.search(r"no flow report from /lift \(for (\d+) s\)", err), err
     summary = json.loads((run / "campaign.json").read_text())
     assert summary["recovered_from_bag"] and not summary["clean"]
+    state = summary["flow_at_stall"]
+    assert state["/lift"]["heard_s_ago"] >= bound - 1.0, state
+    assert all(state[n]["heard_s_ago"] < 2.0 for n in ("/generator", "/identifier")), state
+    commands = state["/generator"]["endpoints"]["writer /pitch/command"]
+    assert commands["count"] > 0 and commands["last"].startswith("sample "), state
     assert "the plan did not run to its end" in out
     assert all(process_gone(c) for c in stopped[0][1])
 

@@ -125,6 +125,8 @@ class FlowWatch:
     silent_s: float = SILENT_S
     events: list[FlowEvent] = field(default_factory=list)
     heard: dict[str, float] = field(default_factory=dict)  # node: when it last reported
+    # node: its last report, per (kind, topic)
+    latest: dict[str, dict[tuple[str, str], EndpointFlow]] = field(default_factory=dict)
     _readers: dict[tuple[str, str], _Reader] = field(default_factory=dict)  # (node, topic)
     _writers: dict[str, _Writer] = field(default_factory=dict)  # topic
     _partitioned: dict[str, float] = field(default_factory=dict)  # host: silent since
@@ -138,6 +140,7 @@ class FlowWatch:
     def report(self, now: float, node: str, flows: Mapping[tuple[str, str], EndpointFlow]) -> None:
         """One node's flow report, received at ``now``."""
         self.heard[node] = now
+        self.latest[node] = dict(flows)
         for (kind, topic), flow in flows.items():
             if kind == WRITER:
                 writer = self._writers.get(topic)
@@ -173,6 +176,35 @@ class FlowWatch:
     def partitioned(self) -> dict[str, float]:
         """``{host: silent since}`` of the hosts cut off now."""
         return dict(self._partitioned)
+
+    def silent(self, now: float) -> dict[str, float | None]:
+        """``{node: seconds since its last report}`` of the nodes not heard within two report
+        periods (None: never heard), the graph's nodes as given and those that reported."""
+        nodes = sorted({*self.remote, *self.local, *self.heard})
+        return {
+            n: (round(now - self.heard[n], 1) if n in self.heard else None)
+            for n in nodes
+            if not self._running(n, now)
+        }
+
+    def graph_state(self, now: float) -> dict[str, Any]:
+        """What every node last reported: how long ago, and per endpoint the messages it passed,
+        its last sample and the endpoints it is matched with; the record of a stall (a stuck
+        reader, a deaf observer and a stopped writer read differently here)."""
+        return {
+            node: {
+                "heard_s_ago": round(now - self.heard[node], 1),
+                "endpoints": {
+                    f"{kind} {topic}": {
+                        "count": flow.count,
+                        "last": self.describe_stamp(flow.stamp_ns),
+                        "matched": flow.matched,
+                    }
+                    for (kind, topic), flow in sorted(flows.items())
+                },
+            }
+            for node, flows in sorted(self.latest.items())
+        }
 
     def _check_readers(self, now: float) -> None:
         for (node, topic), reader in self._readers.items():

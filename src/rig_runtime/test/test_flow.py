@@ -181,6 +181,31 @@ def test_one_silent_node_or_a_silent_machine_is_no_partition() -> None:
     assert watch.check(10.0) == []
 
 
+def test_the_graph_state_says_what_each_node_last_reported_and_who_fell_silent() -> None:
+    """The record of a stall: each node's last report (how long ago, per endpoint its count,
+    last sample and matched peers) and the nodes not heard within two report periods."""
+    watch = FlowWatch(
+        {"/sim_actuator": "rig"},
+        {"/recorder", "/identifier"},
+        describe_stamp=lambda ns: f"sample {ns // MS}",
+    )
+    watch.report(0.0, "/sim_actuator", {("writer", STATE): EndpointFlow(2800, 2800 * MS, 2)})
+    watch.report(9.5, "/recorder", {("reader", STATE): EndpointFlow(2800, 2800 * MS, 1)})
+    state = watch.graph_state(10.0)
+    assert state == {
+        "/recorder": {
+            "heard_s_ago": 0.5,
+            "endpoints": {f"reader {STATE}": {"count": 2800, "last": "sample 2800", "matched": 1}},
+        },
+        "/sim_actuator": {
+            "heard_s_ago": 10.0,
+            "endpoints": {f"writer {STATE}": {"count": 2800, "last": "sample 2800", "matched": 2}},
+        },
+    }
+    # the actuator fell silent 10 s ago; the identifier was never heard; the recorder reports
+    assert watch.silent(10.0) == {"/identifier": None, "/sim_actuator": 10.0}
+
+
 @pytest.mark.slow  # two rclpy nodes talking DDS
 def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for(
     monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from rig_runtime import ros_environment
+from rig_runtime.flow import FlowWatch
 from rig_runtime.graph import GraphError, load_graph, yaml_scalar
 from rig_runtime.launcher import Launcher, parse_overrides
 
@@ -55,6 +56,8 @@ class Outcome:
     stalled: str | None = None  # the identifier or the stream stalled (liveness.py)
     plan_ended: bool = False  # the generator said the plan ended (plan_end on the segments)
     flow_events: list[dict[str, Any]] = field(default_factory=list)  # rig_runtime.flow
+    # every node's last flow report when the run stalled (FlowWatch.graph_state)
+    flow_at_stall: dict[str, Any] | None = None
 
 
 def add_parser(subparsers: Any) -> None:
@@ -245,6 +248,7 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
     lead_host = next((n.host for n in launcher.remote_nodes if n.barrier == "lead"), None)
     monitor = CampaignMonitor(remote, local)
     stalled: str | None = None
+    flow_at_stall: dict[str, Any] | None = None
     started, started_epoch = time.monotonic(), time.time()
     stopped_by: list[str] = []
 
@@ -279,9 +283,9 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
             monitor.liveness.cut_off = cut_off_note(cut, now)
             if reason is None:
                 stalled = monitor.liveness.check(now, stopped)
-                if stalled and (stuck := monitor.flow.stuck_readers()):
-                    names = ", ".join(f"{topic} at {node}" for node, topic in stuck)
-                    stalled += f"; stuck reader(s): {names}"
+                if stalled:
+                    stalled += stall_flow_note(monitor.flow, now)
+                    flow_at_stall = monitor.flow.graph_state(now)
                 reason = stalled
             if timeout and time.monotonic() - started > timeout:
                 reason = f"timeout after {timeout:g} s"
@@ -317,7 +321,23 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
             }
             for e in monitor.flow.events
         ],
+        flow_at_stall=flow_at_stall,
     )
+
+
+def stall_flow_note(flow: FlowWatch, now: float) -> str:
+    """What the flow reports say at a stall: the stuck readers, and the nodes not heard (a
+    stopped, starved or hung process, or this machine no longer receiving); '' when every
+    node reports and no reader is stuck."""
+    note = ""
+    if stuck := flow.stuck_readers():
+        note += "; stuck reader(s): " + ", ".join(f"{topic} at {node}" for node, topic in stuck)
+    if silent := flow.silent(now):
+        note += "; no flow report from " + ", ".join(
+            f"{node} ({'never' if ago is None else f'for {ago:.0f} s'})"
+            for node, ago in silent.items()
+        )
+    return note
 
 
 def cut_off_note(partitioned: dict[str, float], now: float) -> str:
@@ -360,6 +380,8 @@ def summarise(
         "recovered_from_bag": recovered,
         # stuck readers and partitions, at seconds from the campaign's start (rig_runtime.flow)
         "flow_events": outcome.flow_events,
+        # a stall: what each node last reported, per endpoint (rig_runtime.flow)
+        "flow_at_stall": outcome.flow_at_stall,
     }
     (run_dir / "campaign.json").write_text(json.dumps(summary, indent=1))
     print_results(run_dir, summary, bad)
