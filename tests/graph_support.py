@@ -258,19 +258,24 @@ def two_host_campaign(
     static_peers: bool = False,
     rig_overrides: Sequence[str] = (WING[1],),
     during: Callable[["subprocess.Popen[str]"], None] | None = None,
+    real_time_factor: float = 0.0,
     timeout_s: float = 600.0,
 ) -> TwoHostRun:
     """The simulated graph of config/sim.yaml on two hosts: ``rig-launch --host rig`` on the
     lab's rig (generator, actuator, wing, lift) and ``aero-rig campaign --host workstation``
     on its workstation (identifier, recorder), as a lab runs it on two machines. ``during``
-    (given the campaign's process) runs once the identifier holds the first realization."""
-    sets = [f"generator.plan:={plan}", "generator.real_time_factor:=0.0", *rig_overrides]
+    (given the campaign's process) runs once the identifier holds the first realization, and
+    must find the stream running: the run fails if the identifier already holds the plan's
+    end (pace such a run with ``real_time_factor``; 0: as fast as the graph goes)."""
+    sets = [f"generator.plan:={plan}", f"generator.real_time_factor:={real_time_factor}"]
+    sets += rig_overrides
     rig_cmd = rig_launch(RIG, sets)
     cli = [sys.executable, "-m", "aero_rig.cli", "campaign", "--plan", str(plan)]
     cli += ["--host", WORKSTATION, "--out", str(run), "--quiet", "--timeout", str(timeout_s)]
     rig = start_session(lab.command(RIG, rig_cmd), lab_env(lab, RIG, base_env, static_peers))
     fault_at = None
     ended_early = False
+    streamed_before_fault = False  # the identifier held the plan's end when the fault came
     try:
         started = time.time()
         proc = start_session(
@@ -288,6 +293,8 @@ def two_host_campaign(
                 )
                 ended_early = not held or proc.poll() is not None
                 if not ended_early:
+                    # a refit's reason names "plan end" once the identifier holds the whole plan
+                    streamed_before_fault = "plan end" in log.read_text()
                     fault_at = time.time()
                     during(proc)
         finally:
@@ -304,6 +311,11 @@ def two_host_campaign(
             f"the campaign ended before the fault (exit {proc.returncode}):\n{err[-4000:]}\n"
             f"rig (exit {rig.returncode}):\n{(rig_out + rig_err)[-3000:]}\n"
             f"flow_at_stall: {json.dumps(state, indent=1)}"
+        )
+    if streamed_before_fault:
+        raise AssertionError(
+            "the identifier held the plan's end before the fault: the stream was over, so the "
+            "fault did not cut it (pace the run with real_time_factor)\n" + err[-3000:]
         )
     return TwoHostRun(
         proc.returncode, out, err, rig.returncode, rig_out + rig_err, wall, started, fault_at

@@ -41,6 +41,12 @@ ROS2 = Path(sys.executable).parent / "ros2"
 RIG_NODES = ["/generator", "/lift", "/sim_actuator", "/sim_wing"]
 WORKSTATION_NODES = ["/identifier", "/recorder"]
 pytestmark = [pytest.mark.ci_required, pytest.mark.timeout(900)]
+# The pace of the runs with a pulled cable. The cable is pulled once the identifier holds the
+# first realization, about half of the small plan; as fast as the graph goes, the rig streams
+# the other half in a few seconds, and a loaded machine's identifier can get to that point
+# when the rig has sent everything, so the fault would cut nothing. At 4× real time the rig
+# streams for about 9 s more (the identifier keeps up at 20×).
+CABLE_PACE = 4.0
 
 
 @pytest.fixture(scope="module")
@@ -157,7 +163,13 @@ def test_static_peers_without_multicast_and_a_cable_pulled_for_3_s_lose_nothing(
     campaign names the partition while it lasts and the host's return."""
     run = tmp_path / "run"
     ran = two_host_campaign(
-        lab, small_plan, run, graph_env(), static_peers=True, during=pull_cable(lab, 3.0)
+        lab,
+        small_plan,
+        run,
+        graph_env(),
+        static_peers=True,
+        during=pull_cable(lab, 3.0),
+        real_time_factor=CABLE_PACE,
     )
     assert ran.code == 0, ran.out[-3000:] + ran.err[-3000:]
     assert_lossless_and_identical(run, small_campaign[0])
@@ -180,7 +192,12 @@ def test_a_cable_pulled_past_the_lease_is_named_a_partition_and_ends_the_run(
     workstation's bag holds, and the run exits 3 listing the samples it lost."""
     run = tmp_path / "run"
     ran = two_host_campaign(
-        lab, small_plan, run, graph_env(), during=pull_cable(lab, PARTICIPANT_LEASE_S + 5.0)
+        lab,
+        small_plan,
+        run,
+        graph_env(),
+        during=pull_cable(lab, PARTICIPANT_LEASE_S + 5.0),
+        real_time_factor=CABLE_PACE,
     )
     assert ran.code == 3, ran.out[-3000:] + ran.err[-3000:]
     assert ran.fault_at is not None
