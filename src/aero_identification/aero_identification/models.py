@@ -246,7 +246,8 @@ class LMIteration:
         iteration: trial number (0 = the initial model).
         cost: training cost of the trial parameters: mean squared (weighted) simulation error
             in normalised output units; inf if the simulation diverged.
-        cost_val: validation mean squared error [output units²] (nan without validation, inf if
+        cost_val: validation mean squared error [output units²] (nan without validation or for
+            a trial that did not lower the training cost, which is rejected unsimulated; inf if
             the validation simulation diverged).
         lambda_: damping λ used for the step (relative to the largest singular value of the
             normalised Jacobian; nan for iteration 0).

@@ -41,7 +41,7 @@ from aero_identification.monomials import (
     evaluate_monomials,
     structure_exponents,
 )
-from aero_identification.pnlss_kernels import jacobian_records, simulate_records
+from aero_identification.pnlss_kernels import bounded_records, jacobian_records, simulate_records
 
 # Where the monomials enter (Paduart et al. 2010, eq. 2): the state equation only (E), or the
 # state and the output equation (E and F).
@@ -654,6 +654,15 @@ class _Problem:
         )  # fmt: skip
         return y + m["offset"][:, 0]
 
+    def bounded(self, th: np.ndarray, u: np.ndarray, x0: np.ndarray) -> bool:
+        """Whether every record's simulation stays finite (its states bounded), without
+        computing its outputs."""
+        m = self.layout.unpack(th)
+        ok = bounded_records(
+            m["A"], m["B"], m["E"], self.frame.exp_state, u, x0, STATE_BOUND
+        )  # fmt: skip
+        return bool(np.all(ok))
+
     def residual(self, y_sim: np.ndarray) -> np.ndarray:
         e = y_sim[:, self.nt :, :] - self.y_rec
         if self.sqrt_rw is not None:
@@ -675,7 +684,7 @@ class _Problem:
         x0 = np.zeros((held.u.shape[0], nx))
         if held.u_stress is not None:
             x0s = np.zeros((held.u_stress.shape[0], nx))
-            if not np.all(np.isfinite(self.simulate(th, held.u_stress, x0s))):
+            if not self.bounded(th, held.u_stress, x0s):
                 return math.inf  # diverges at the stressed amplitude
         y_mean, y_scale = self.frame.y_mean, self.frame.y_scale
         y = y_mean[0] + y_scale[0] * self.simulate(th, held.u, x0)[:, held.nt :, 0]
@@ -714,7 +723,8 @@ def _levenberg_marquardt(
 
     A trial is accepted if it lowers the training cost and (with validation) its validation
     simulation stays finite; the iterate kept is the best on the validation records (the
-    start included), or the last accepted one without validation.
+    start included), or the last accepted one without validation. A trial that does not lower
+    the training cost is rejected without its validation simulations.
     """
     validated = problem.held is not None
     cost = problem.train_cost(theta)
@@ -740,7 +750,9 @@ def _levenberg_marquardt(
             step = -(V @ (s / (s * s + lam * lam) * g)) / col_norm
             trial = theta + step
             c_tr = problem.train_cost(trial)
-            cv_tr = problem.val_cost(trial)
+            # The validation simulations only decide between trials that lower the training
+            # cost: a trial that does not is rejected without them (cost_val nan).
+            cv_tr = problem.val_cost(trial) if c_tr < cost else math.nan
             accepted = c_tr < cost and (not validated or math.isfinite(cv_tr))
             history.append(LMIteration(it, c_tr, cv_tr, lam_rel, accepted))
             if accepted:

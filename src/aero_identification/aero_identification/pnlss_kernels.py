@@ -140,6 +140,53 @@ def _simulate_one(A, B, C, D, E, F, exp_state, exp_output, u, x0, bound, y) -> i
     return T
 
 
+@njit(cache=True)
+def _stays_bounded(A, B, E, exp_state, u, x0, bound) -> bool:
+    """Whether the states of one record stay in [-bound, bound] while it is simulated: exactly
+    when `_simulate_one`'s outputs are all finite (its outputs are finite functions of bounded
+    states, and the state after the last sample sets no output), without the outputs."""
+    nx = A.shape[0]
+    nu = B.shape[1]
+    T = u.shape[0]
+    dmax = 1
+    for k in range(exp_state.shape[0]):
+        dmax = max(dmax, exp_state[k].sum())
+    z = np.empty(nx + nu)
+    pw = np.empty((nx + nu, dmax + 1))
+    zeta = np.empty(exp_state.shape[0])
+    x = x0.copy()
+    xn = np.empty(nx)
+    for t in range(T - 1):
+        for i in range(nx):
+            z[i] = x[i]
+        for j in range(nu):
+            z[nx + j] = u[t, j]
+        _powers(z, dmax, pw)
+        _monomials(pw, exp_state, zeta)
+        if not _next_state(A, B, E, x, u, t, zeta, bound, xn):
+            return False
+        for i in range(nx):
+            x[i] = xn[i]
+    return True
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def bounded_records(A, B, E, exp_state, u, x0, bound):
+    """Whether each of R records keeps its states bounded (`_stays_bounded`), in parallel:
+    the divergence check of a stressed input, which needs no outputs.
+
+    Args: as `simulate_records` (without the output equation's C, D, F and exponents).
+
+    Returns:
+        (R,) booleans.
+    """
+    R = u.shape[0]
+    ok = np.empty(R, dtype=np.bool_)
+    for r in prange(R):
+        ok[r] = _stays_bounded(A, B, E, exp_state, u[r], x0[r], bound)
+    return ok
+
+
 @njit(cache=True, parallel=True, nogil=True)
 def simulate_records(A, B, C, D, E, F, exp_state, exp_output, u, x0, bound):
     """Simulate R records in parallel.

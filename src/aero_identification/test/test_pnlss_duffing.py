@@ -11,7 +11,7 @@ import pytest
 
 from aero_identification.bla import BLA
 from aero_identification.data import PeriodicData
-from aero_identification.models import LinearStateSpace, PNLSSModel
+from aero_identification.models import STATE_BOUND, LinearStateSpace, PNLSSModel
 from aero_identification.pnlss import PnlssSettings, fit_pnlss
 from aero_identification.subspace import fit_linear_ss
 
@@ -150,9 +150,18 @@ def _validation_mse(model: PNLSSModel, u_val: np.ndarray, y_val: np.ndarray) -> 
     return float(np.mean((y[model.n_transient :] - y_val[model.n_transient :]) ** 2))
 
 
-def _check_history(model: PNLSSModel) -> None:
-    """Accepted costs never increase; λ rises after every rejection and falls after acceptance."""
+def _check_history(model: PNLSSModel) -> int:
+    """Accepted costs never increase; λ rises after every rejection and falls after acceptance;
+    a trial that does not lower the training cost is rejected without its validation runs
+    (cost_val nan). Returns the number of those trials."""
     h = model.history_
+    current, unsimulated = h[0].cost, 0
+    for r in h[1:]:
+        if not r.cost < current:
+            assert not r.accepted and math.isnan(r.cost_val)
+            unsimulated += 1
+        elif r.accepted:
+            current = r.cost
     accepted_costs = [r.cost for r in h if r.accepted]
     assert all(b <= a for a, b in itertools.pairwise(accepted_costs))
     for prev, nxt in itertools.pairwise(h[1:]):
@@ -160,6 +169,7 @@ def _check_history(model: PNLSSModel) -> None:
             assert nxt.lambda_ < prev.lambda_
         else:
             assert nxt.lambda_ > prev.lambda_
+    return unsimulated
 
 
 def test_diverging_steps_from_a_bad_start_are_rejected(duffing_case):
@@ -185,7 +195,7 @@ def test_diverging_steps_from_a_bad_start_are_rejected(duffing_case):
     assert h[0].cost > 10 * start.cost_  # the start really is bad
     diverged = [r for r in h if not math.isfinite(r.cost)]
     assert diverged and not any(r.accepted for r in diverged)
-    _check_history(model)
+    assert _check_history(model) >= len(diverged)
     best_val = min(r.cost_val for r in h if r.accepted)
     assert _validation_mse(model, c.u_val, c.y_val) == pytest.approx(best_val, rel=1e-9)
     assert best_val < h[0].cost_val / 100  # ... and the fit recovered from the bad start
@@ -366,6 +376,46 @@ def test_stress_rejects_iterates_and_models_that_diverge_at_a_larger_amplitude(d
     assert periodic_at(model, c.data, 1.5)
     with pytest.raises(ValueError, match="stress needs validation"):
         fit_pnlss(c.data, c.lin, PnlssSettings(max_iter=1, stress=1.5))
+
+
+def test_the_stress_check_without_outputs_agrees_with_the_simulation(duffing_case):
+    """`bounded_records` (the stressed inputs' divergence check) says a record stays bounded
+    exactly when `simulate_records` gives it finite outputs, on records that diverge early,
+    late and not at all."""
+    from aero_identification.pnlss_kernels import bounded_records, simulate_records
+
+    c = duffing_case
+    start = fit_pnlss(c.data, c.lin, PnlssSettings(degrees=(2, 3), max_iter=0))
+    cubic = int(np.flatnonzero((start.exponents_state == [3, 0, 0]).all(axis=1))[0])
+    E = start.E.copy()
+    E[0, cubic] = 1e-3  # diverges somewhere between 1× and 1.5× the data's amplitude
+    un = (c.data.u[:, 0, 0] - start.u_mean[0]) / start.u_scale[0]
+    scales = np.linspace(0.5, 3.0, 26)
+    u = np.ascontiguousarray(np.stack([np.tile(s * un, 3) for s in scales])[:, :, None])
+    x0 = np.zeros((u.shape[0], start.nx))
+    args = (start.A, start.B, start.C, start.D, E, start.F, start.exponents_state,
+            start.exponents_output, u, x0, STATE_BOUND)  # fmt: skip
+    y = simulate_records(*args)
+    finite = np.all(np.isfinite(y), axis=(1, 2))
+    ok = bounded_records(start.A, start.B, E, start.exponents_state, u, x0, STATE_BOUND)
+    assert ok.tolist() == finite.tolist()
+    assert finite.any() and not finite.all()
+    # A record that leaves the bound only at its last state keeps finite outputs: so does the
+    # check (the state after the last sample sets no output).
+    last_nan = [
+        int(np.argmax(~np.isfinite(y[r, :, 0]))) for r in range(len(scales)) if not finite[r]
+    ]
+    assert min(last_nan) > 0
+    diverging = int(np.flatnonzero(~finite)[0])
+    T = last_nan[0]  # the first non-finite output: its state left the bound one step before
+    cut = np.ascontiguousarray(u[diverging : diverging + 1, :T])
+    assert np.all(np.isfinite(simulate_records(*args[:8], cut, x0[:1], STATE_BOUND)))
+    assert bounded_records(start.A, start.B, E, start.exponents_state, cut, x0[:1], STATE_BOUND)[0]
+    cut = np.ascontiguousarray(u[diverging : diverging + 1, : T + 1])
+    assert not np.all(np.isfinite(simulate_records(*args[:8], cut, x0[:1], STATE_BOUND)))
+    assert not bounded_records(
+        start.A, start.B, E, start.exponents_state, cut, x0[:1], STATE_BOUND
+    )[0]
 
 
 def test_settings_check_their_values_before_any_fit():
