@@ -62,9 +62,12 @@ try:
     import rclpy.node
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
+    from rclpy.task import Future
 except ImportError as _exc:  # the one line every graph command prints (ros_environment)
     raise ImportError(ros_environment.NO_RCLPY) from _exc
 
+# spin()'s turn: how soon a flag set by a signal handler (or a gone launcher) is read.
+SPIN_TURN_S = 0.05
 PAUSE_WATCH_S = 1.0  # the period of every node's pause watch (start_pause_watch)
 EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
 # When a node closes, its reliable writers wait this long for their readers to acknowledge what
@@ -310,6 +313,7 @@ class Node(rclpy.node.Node):
         self.exit_code = 0
         self._closed = False
         self._shutdown_requested = False
+        self._spin_turn: Future | None = None  # the turn of spin() under way
         self._on_shutdown: list[Callable[[], None]] = []
         # Only a direct child of that launcher watches it (not a process that inherited the
         # variable further down).
@@ -729,6 +733,17 @@ class Node(rclpy.node.Node):
         self._on_shutdown.append(callback)
 
     def request_shutdown(self, exit_code: int | None = None) -> None:
+        """Stop spinning: ``spin`` returns after the callback that asks (not from a signal
+        handler: see ``_signal_shutdown``)."""
+        self._signal_shutdown(exit_code)
+        turn = self._spin_turn
+        if turn is not None and not turn.done():
+            turn.set_result(None)  # ends the executor's loop once this callback returns
+
+    def _signal_shutdown(self, exit_code: int | None = None) -> None:
+        """``request_shutdown`` for a signal handler: only the flag, which ``spin`` reads
+        after at most SPIN_TURN_S. Completing the turn's future there could deadlock: the
+        handler may interrupt this thread inside that future's own lock."""
         if exit_code is not None:
             self.exit_code = exit_code
         self._shutdown_requested = True
@@ -758,10 +773,19 @@ class Node(rclpy.node.Node):
                     self.request_shutdown(1)
             return not self._shutdown_requested
 
-        # One event per turn. rclpy's EventsExecutor.spin_until_future_complete (its own loop)
-        # never returns without a timeout in rclpy 7.1.6.
-        while keep_going():
-            self.spin_once(0.05)
+        # The executor's own loop, in turns of SPIN_TURN_S: a turn handles every event that
+        # comes without returning to Python between them (a Python loop around spin_once
+        # costs the stream nodes about a tenth of their CPU). rclpy 7.1's EventsExecutor.spin
+        # takes no timeout; spin_until_future_complete does, and request_shutdown completes the
+        # turn's future. A new future per turn: each call adds a done callback to it.
+        try:
+            while keep_going():
+                self._spin_turn = Future()
+                self._rig_executor.spin_until_future_complete(
+                    self._spin_turn, timeout_sec=SPIN_TURN_S
+                )
+        finally:
+            self._spin_turn = None
 
     def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Spin until ``predicate()`` is true (returns True) or the timeout passes (False)."""
@@ -908,7 +932,7 @@ def run_node(
             return
         signalled.append(signum)
         node.logger.info("received %s, shutting down", signal.Signals(signum).name)
-        node.request_shutdown()
+        node._signal_shutdown()
 
     previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
