@@ -357,6 +357,25 @@ class PNLSSModel(StateSpaceDimensions):
         y = self.y_mean + self.y_scale * yn
         return y[:, 0] if (one_d and self.ny == 1) else y
 
+    def state_after(self, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray | None:
+        """The normalised state after the input u, simulated without its outputs (a warm-up
+        before `simulate(..., x0=...)`, which then continues exactly as one simulation of the
+        whole input would); None if a state leaves STATE_BOUND on the way.
+
+        Args:
+            u: (T,) or (T, nu) input samples (absolute).
+            x0: (nx,) initial normalised state; default 0 (the operating point).
+        """
+        from aero_identification.pnlss_kernels import advance_records
+
+        u2, _ = _as_input(u, self.nu)
+        x = np.zeros(self.nx) if x0 is None else np.asarray(x0, dtype=float).reshape(self.nx)
+        un = (u2 - self.u_mean) / self.u_scale
+        states, ok = advance_records(
+            self.A, self.B, self.E, self.exponents_state, un[None], x[None], STATE_BOUND
+        )
+        return states[0] if ok[0] else None
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dictionary of the model (json.dumps works); inverse of `from_dict`."""
         return {

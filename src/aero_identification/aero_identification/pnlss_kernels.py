@@ -141,22 +141,19 @@ def _simulate_one(A, B, C, D, E, F, exp_state, exp_output, u, x0, bound, y) -> i
 
 
 @njit(cache=True)
-def _stays_bounded(A, B, E, exp_state, u, x0, bound) -> bool:
-    """Whether the states of one record stay in [-bound, bound] while it is simulated: exactly
-    when `_simulate_one`'s outputs are all finite (its outputs are finite functions of bounded
-    states, and the state after the last sample sets no output), without the outputs."""
+def _advance(A, B, E, exp_state, u, x, bound) -> bool:
+    """Advance the state x in place over the samples of u (the state equation alone, as
+    `_simulate_one` steps it); False as soon as a state leaves [-bound, bound] or is not finite."""
     nx = A.shape[0]
     nu = B.shape[1]
-    T = u.shape[0]
     dmax = 1
     for k in range(exp_state.shape[0]):
         dmax = max(dmax, exp_state[k].sum())
     z = np.empty(nx + nu)
     pw = np.empty((nx + nu, dmax + 1))
     zeta = np.empty(exp_state.shape[0])
-    x = x0.copy()
     xn = np.empty(nx)
-    for t in range(T - 1):
+    for t in range(u.shape[0]):
         for i in range(nx):
             z[i] = x[i]
         for j in range(nu):
@@ -172,19 +169,39 @@ def _stays_bounded(A, B, E, exp_state, u, x0, bound) -> bool:
 
 @njit(cache=True, parallel=True, nogil=True)
 def bounded_records(A, B, E, exp_state, u, x0, bound):
-    """Whether each of R records keeps its states bounded (`_stays_bounded`), in parallel:
-    the divergence check of a stressed input, which needs no outputs.
+    """Whether each of R records keeps its states bounded while it is simulated, in parallel:
+    exactly when `simulate_records` gives it finite outputs (they are finite functions of
+    bounded states, and the state after the last sample sets no output), without the outputs.
+    The divergence check of a stressed input.
 
     Args: as `simulate_records` (without the output equation's C, D, F and exponents).
 
     Returns:
         (R,) booleans.
     """
-    R = u.shape[0]
+    R, T, _ = u.shape
     ok = np.empty(R, dtype=np.bool_)
     for r in prange(R):
-        ok[r] = _stays_bounded(A, B, E, exp_state, u[r], x0[r], bound)
+        ok[r] = _advance(A, B, E, exp_state, u[r, : max(T - 1, 0)], x0[r].copy(), bound)
     return ok
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def advance_records(A, B, E, exp_state, u, x0, bound):
+    """The states after each of R records, without the outputs (a warm-up), in parallel.
+
+    Args: as `bounded_records`.
+
+    Returns:
+        (R, nx) states after the last sample, (R,) whether every state stayed bounded (the
+        last one included).
+    """
+    R = u.shape[0]
+    x = x0.copy()
+    ok = np.empty(R, dtype=np.bool_)
+    for r in prange(R):
+        ok[r] = _advance(A, B, E, exp_state, u[r], x[r], bound)
+    return x, ok
 
 
 @njit(cache=True, parallel=True, nogil=True)

@@ -418,6 +418,24 @@ def test_the_stress_check_without_outputs_agrees_with_the_simulation(duffing_cas
     )[0]
 
 
+def test_a_warm_up_without_outputs_continues_as_one_simulation(duffing_case, duffing_model):
+    """`state_after` then `simulate(x0=...)` gives bit for bit the tail of one simulation of
+    the whole input (scan.periodic_at's warm-up), and None where that simulation diverges."""
+    c = duffing_case
+    u = np.tile(c.data.u[:, 0, 0], 3)
+    split = 2 * N
+    whole = duffing_model.simulate(u)
+    x = duffing_model.state_after(u[:split])
+    assert x is not None
+    assert np.array_equal(duffing_model.simulate(u[split:], x0=x), whole[split:])
+    cubic = int(np.flatnonzero((duffing_model.exponents_state == [3, 0, 0]).all(axis=1))[0])
+    E = duffing_model.E.copy()
+    E[0, cubic] = 1.0  # the state runs away at once
+    grows = dataclasses.replace(duffing_model, E=E)
+    assert not np.all(np.isfinite(grows.simulate(u[:split])))
+    assert grows.state_after(u[:split]) is None
+
+
 def test_settings_check_their_values_before_any_fit():
     """PnlssSettings holds the fit's hyperparameters; the checks that need no data are its own."""
     assert PnlssSettings(degrees=[3, 2, 3]).degrees == (2, 3)  # type: ignore[arg-type]
