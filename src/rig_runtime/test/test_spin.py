@@ -1,6 +1,6 @@
 """Node.spin: the executor's own loop, stopped by the callback that asks."""
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -18,32 +18,28 @@ def node(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Ite
     made.close()
 
 
-def test_spin_returns_after_the_callback_that_requests_shutdown(node: Node) -> None:
-    # A timer due every millisecond: a turn that went on after the request (SPIN_TURN_S,
-    # 50 ms) would call it dozens of times more.
+def _ticks_until_stopped(node: Node, stop: Callable[[int], None]) -> int:
+    """Spin a timer due every millisecond that calls ``stop(exit_code 3)`` at its fifth call;
+    how many calls ran before spin returned."""
     calls: list[int] = []
 
     def tick() -> None:
         calls.append(len(calls))
         if len(calls) == 5:
-            node.request_shutdown(3)
+            stop(3)
 
     node.create_timer(0.001, tick)
     node.spin()
-    assert len(calls) == 5
     assert node.exit_code == 3
+    return len(calls)
+
+
+def test_spin_returns_after_the_callback_that_requests_shutdown(node: Node) -> None:
+    # A turn that went on after the request (SPIN_TURN_S, 50 ms) would call the timer dozens
+    # of times more.
+    assert _ticks_until_stopped(node, node.request_shutdown) == 5
 
 
 def test_a_flag_set_by_a_signal_handler_ends_spin(node: Node) -> None:
     # What run_node's SIGINT/SIGTERM handler calls: only the flag, read between turns.
-    calls: list[int] = []
-
-    def tick() -> None:
-        calls.append(len(calls))
-        if len(calls) == 5:
-            node._signal_shutdown(4)
-
-    node.create_timer(0.001, tick)
-    node.spin()
-    assert len(calls) >= 5
-    assert node.exit_code == 4
+    assert _ticks_until_stopped(node, node._signal_shutdown) >= 5
