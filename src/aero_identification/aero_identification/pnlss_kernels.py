@@ -169,10 +169,11 @@ def _advance(A, B, E, exp_state, u, x, bound) -> bool:
 
 @njit(cache=True, parallel=True, nogil=True)
 def bounded_records(A, B, E, exp_state, u, x0, bound):
-    """Whether each of R records keeps its states bounded while it is simulated, in parallel:
-    exactly when `simulate_records` gives it finite outputs (they are finite functions of
-    bounded states, and the state after the last sample sets no output), without the outputs.
-    The divergence check of a stressed input.
+    """Whether each of R records keeps its states bounded while it is simulated, in parallel,
+    without the outputs: the divergence check of a stressed input. With finite C, D, F (the
+    fit checks the training cost first) this holds exactly when `simulate_records` gives the
+    record finite outputs: they are polynomials of bounded states, and the state after the
+    last sample sets no output.
 
     Args: as `simulate_records` (without the output equation's C, D, F and exponents).
 

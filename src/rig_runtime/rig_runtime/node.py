@@ -66,7 +66,7 @@ try:
 except ImportError as _exc:  # the one line every graph command prints (ros_environment)
     raise ImportError(ros_environment.NO_RCLPY) from _exc
 
-# spin()'s turn: how soon a flag set by a signal handler (or a gone launcher) is read.
+# spin()'s turn check: how soon a flag set by a signal handler (or a gone launcher) is read.
 SPIN_TURN_S = 0.05
 PAUSE_WATCH_S = 1.0  # the period of every node's pause watch (start_pause_watch)
 EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
@@ -733,20 +733,24 @@ class Node(rclpy.node.Node):
         self._on_shutdown.append(callback)
 
     def request_shutdown(self, exit_code: int | None = None) -> None:
-        """Stop spinning: ``spin`` returns after the callback that asks (not from a signal
-        handler: see ``_signal_shutdown``)."""
+        """Stop spinning: ``spin``'s turn ends after the event whose callback asks (a
+        subscription's event delivers every sample it announced). Not from a signal handler:
+        see ``_signal_shutdown``."""
         self._signal_shutdown(exit_code)
-        turn = self._spin_turn
-        if turn is not None and not turn.done():
-            turn.set_result(None)  # ends the executor's loop once this callback returns
+        self._end_turn()
 
     def _signal_shutdown(self, exit_code: int | None = None) -> None:
-        """``request_shutdown`` for a signal handler: only the flag, which ``spin`` reads
-        after at most SPIN_TURN_S. Completing the turn's future there could deadlock: the
-        handler may interrupt this thread inside that future's own lock."""
+        """``request_shutdown`` for a signal handler: only the flag, which ``spin``'s turn
+        check reads within SPIN_TURN_S. Completing the turn's future there could deadlock:
+        the handler may interrupt this thread inside that future's own lock."""
         if exit_code is not None:
             self.exit_code = exit_code
         self._shutdown_requested = True
+
+    def _end_turn(self) -> None:
+        turn = self._spin_turn
+        if turn is not None and not turn.done():
+            turn.set_result(None)  # the executor's loop returns once this callback does
 
     def spin_once(self, timeout_s: float = 0.05) -> int:
         """Wait up to ``timeout_s`` for work and handle one ready item (a sample, a timer, a
@@ -762,7 +766,9 @@ class Node(rclpy.node.Node):
         """Handle callbacks until a shutdown is requested (or the launcher is gone)."""
         next_check = time.monotonic() + 0.5
 
-        def keep_going() -> bool:
+        def check_turn() -> None:
+            # A timer: while samples keep coming, the executor's loop may not return at its
+            # timeout, so the flag a signal handler set and the launcher are checked here.
             nonlocal next_check
             if self._launcher_pid is not None and time.monotonic() >= next_check:
                 next_check = time.monotonic() + 0.5
@@ -770,22 +776,27 @@ class Node(rclpy.node.Node):
                     self.logger.error(
                         "the launcher (pid %d) is gone: shutting down", self._launcher_pid
                     )
-                    self.request_shutdown(1)
-            return not self._shutdown_requested
+                    self._signal_shutdown(1)
+            if self._shutdown_requested:
+                self._end_turn()
 
-        # The executor's own loop, in turns of SPIN_TURN_S: a turn handles every event that
-        # comes without returning to Python between them (a Python loop around spin_once
-        # costs the stream nodes about a tenth of their CPU). rclpy 7.1's EventsExecutor.spin
-        # takes no timeout; spin_until_future_complete does, and request_shutdown completes the
-        # turn's future. A new future per turn: each call adds a done callback to it.
+        # The executor's own loop, in turns: a turn handles every event that comes without
+        # returning to Python between them (a Python loop around spin_once costs the stream
+        # nodes about a tenth of their CPU). rclpy 7.1's EventsExecutor.spin takes no
+        # timeout; spin_until_future_complete does, and the turn ends when its future is
+        # completed (request_shutdown, check_turn). A new future per turn: each call adds a
+        # done callback to it.
+        timer = self.create_timer(SPIN_TURN_S, check_turn)
         try:
-            while keep_going():
+            while not self._shutdown_requested and self.context.ok():
                 self._spin_turn = Future()
                 self._rig_executor.spin_until_future_complete(
                     self._spin_turn, timeout_sec=SPIN_TURN_S
                 )
+                check_turn()
         finally:
             self._spin_turn = None
+            self.destroy_timer(timer)
 
     def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Spin until ``predicate()`` is true (returns True) or the timeout passes (False)."""
