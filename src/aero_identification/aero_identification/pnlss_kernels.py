@@ -146,9 +146,7 @@ def _advance(A, B, E, exp_state, u, x, bound) -> bool:
     `_simulate_one` steps it); False as soon as a state leaves [-bound, bound] or is not finite."""
     nx = A.shape[0]
     nu = B.shape[1]
-    dmax = 1
-    for k in range(exp_state.shape[0]):
-        dmax = max(dmax, exp_state[k].sum())
+    dmax = _max_degree(exp_state, exp_state)
     z = np.empty(nx + nu)
     pw = np.empty((nx + nu, dmax + 1))
     zeta = np.empty(exp_state.shape[0])
@@ -168,30 +166,10 @@ def _advance(A, B, E, exp_state, u, x, bound) -> bool:
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def bounded_records(A, B, E, exp_state, u, x0, bound):
-    """Whether each of R records keeps its states bounded while it is simulated, in parallel,
-    without the outputs: the divergence check of a stressed input. With finite C, D, F (the
-    fit checks the training cost first) this holds exactly when `simulate_records` gives the
-    record finite outputs: they are polynomials of bounded states, and the state after the
-    last sample sets no output.
-
-    Args: as `simulate_records` (without the output equation's C, D, F and exponents).
-
-    Returns:
-        (R,) booleans.
-    """
-    R, T, _ = u.shape
-    ok = np.empty(R, dtype=np.bool_)
-    for r in prange(R):
-        ok[r] = _advance(A, B, E, exp_state, u[r, : max(T - 1, 0)], x0[r].copy(), bound)
-    return ok
-
-
-@njit(cache=True, parallel=True, nogil=True)
 def advance_records(A, B, E, exp_state, u, x0, bound):
     """The states after each of R records, without the outputs (a warm-up), in parallel.
 
-    Args: as `bounded_records`.
+    Args: as `simulate_records` (without the output equation's C, D, F and exponents).
 
     Returns:
         (R, nx) states after the last sample, (R,) whether every state stayed bounded (the
@@ -203,6 +181,21 @@ def advance_records(A, B, E, exp_state, u, x0, bound):
     for r in prange(R):
         ok[r] = _advance(A, B, E, exp_state, u[r], x[r], bound)
     return x, ok
+
+
+def bounded_records(A, B, E, exp_state, u, x0, bound):
+    """Whether each of R records keeps its states bounded while it is simulated, in parallel,
+    without the outputs: the divergence check of a stressed input. With finite C, D, F (the
+    fit checks the training cost first) this holds exactly when `simulate_records` gives the
+    record finite outputs: they are polynomials of bounded states, and the state after the
+    last sample sets no output (so it is not advanced to).
+
+    Args: as `advance_records`.
+
+    Returns:
+        (R,) booleans.
+    """
+    return advance_records(A, B, E, exp_state, u[:, : max(u.shape[1] - 1, 0)], x0, bound)[1]
 
 
 @njit(cache=True, parallel=True, nogil=True)
