@@ -84,6 +84,51 @@ def relative_rms_error_spread(
     return float(np.std(errors, ddof=1))
 
 
+def noise_floor(y_true: np.ndarray, samples_per_period: int) -> float:
+    """The lowest relative RMS error a deterministic model of the input can reach on a periodic
+    record: its periods' scatter about their own mean period, in Table 1's units.
+
+    With y_p = g + n_p (p = 1 … P; g the periodic response to the periodic input, n_p the noise
+    and the cycle-to-cycle variation, independent over the periods with variance σ²), the
+    residual of the sample mean period ȳ = (1/P) Σ y_p has E[(y_p − ȳ)²] = σ² (P − 1)/P, so
+
+        floor = √(P/(P − 1)) · rms(y − ȳ) / rms(y − mean y)
+
+    estimates σ / rms(y − mean y): the relative RMS error of the true periodic response g itself
+    (the sample variance over the periods of a periodic measurement, [Pintelon2012]). Its
+    denominator is `relative_rms_error`'s, over the whole record.
+
+    Args:
+        y_true: (P·samples_per_period,) measured output, whole periods, P ≥ 2.
+        samples_per_period: samples in one period.
+
+    Returns:
+        The floor, ≥ 0.
+
+    Raises:
+        ValueError: for a record that is not 1-D or not whole periods, fewer than 2 periods,
+            non-finite data or a constant record.
+    """
+    y = np.asarray(y_true, dtype=float)
+    n = int(samples_per_period)
+    if y.ndim != 1 or n < 1 or n != samples_per_period or y.size == 0 or y.size % n:
+        raise ValueError(
+            f"expected a 1-D record of whole periods of {samples_per_period} samples; got shape "
+            f"{y.shape}"
+        )
+    periods = y.size // n
+    if periods < 2:
+        raise ValueError("the noise floor needs at least 2 periods")
+    if not np.all(np.isfinite(y)):
+        raise ValueError("y_true contains NaN or inf")
+    by_period = y.reshape(periods, n)
+    residual = by_period - by_period.mean(axis=0)
+    spread = np.sqrt(np.mean((y - y.mean()) ** 2))
+    if spread == 0:
+        raise ValueError("y_true is constant: the relative RMS error is undefined")
+    return float(np.sqrt(np.mean(residual**2) * periods / (periods - 1)) / spread)
+
+
 def interpolate_frf(bla: BLA, freq_hz: float | np.ndarray) -> np.ndarray:
     """BLA at arbitrary frequencies inside the excited band.
 

@@ -55,9 +55,11 @@ TABLE1_ALL_LEVELS: Final = "markdown"
 TABLE1_LEVEL1: Final = "markdown_level1"
 TABLE1_NO_CLUSTERING: Final = "markdown_no_clustering"
 TABLE1_HELD_OUT: Final = "markdown_held_out"
+TABLE1_FLOOR_RATIOS: Final = "markdown_floor_ratios"
 TABLE1_TITLES: Final = {
     TABLE1_ALL_LEVELS: "Table 1, models of all levels",
     TABLE1_LEVEL1: "Table 1, models of level 1",
+    TABLE1_FLOOR_RATIOS: "Table 1 divided by the noise floor",
     TABLE1_NO_CLUSTERING: "Table 1 without clustering",
     TABLE1_HELD_OUT: "Held-out levels",
 }

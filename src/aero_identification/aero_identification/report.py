@@ -394,6 +394,8 @@ def summary_markdown(result: IdentificationResult) -> str:
         title = {
             "table1_all_levels": "Table 1, trained on all levels (relative RMS error on sines)",
             "table1_level1": "Table 1, trained on level 1 (the paper's variant)",
+            "table1_floor_ratios": "Table 1 divided by the noise floor (1: as good as the data "
+            "allow)",
             "table1_no_clustering": "Table 1, all levels, without clustering",
             "validation_errors": "Validation on held-out levels (relative RMS error)",
             "validation_errors_no_clustering": "Held-out levels, without clustering",

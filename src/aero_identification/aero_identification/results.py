@@ -17,7 +17,7 @@ from .dataset import LevelRecord
 from .models import LinearStateSpace, PNLSSModel
 from .quality import data_quality_note
 from .scan import ScanResult
-from .tables import held_out_table, table1
+from .tables import floor_ratio_table, held_out_table, table1
 
 
 @dataclass
@@ -143,6 +143,9 @@ class IdentificationResult:
     # (metrics.relative_rms_error_spread; NaN for a single period or a diverged model).
     spreads_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
     spreads_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
+    # Table 1's "noise floor" row, {(level, freq_hz): floor}: the sine's periods about their
+    # own mean (metrics.noise_floor), the error no deterministic model of α goes below.
+    noise_floor: dict[tuple[str, float], float] = field(default_factory=dict)
     held_out_errors: list[dict[str, Any]] = field(default_factory=list)
     predictions: list[dict[str, Any]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -187,12 +190,13 @@ class IdentificationResult:
         if self.sines_planned or freqs:
             boot = self.bootstrap
             tables["table1_all_levels"] = table1(
-                self.errors_all, levels, freqs, spreads=self.spreads_all,
+                self.errors_all, levels, freqs, spreads=self.spreads_all, floor=self.noise_floor,
                 estimation_spreads=None if boot is None else boot.spreads_all,
                 estimation_means=None if boot is None else boot.means_all,
             )  # fmt: skip
             tables["table1_level1"] = table1(
                 self.errors_level1, levels, freqs, spreads=self.spreads_level1,
+                floor=self.noise_floor,
                 estimation_spreads=None if boot is None else boot.spreads_level1,
                 estimation_means=None if boot is None else boot.means_level1,
             )  # fmt: skip
@@ -203,12 +207,18 @@ class IdentificationResult:
                 ):
                     md, csv_text = tables[key]
                     tables[key] = (boot.note(errors, level1) + md, csv_text)
+            if self.noise_floor:
+                tables["table1_floor_ratios"] = floor_ratio_table(
+                    [("all levels", self.errors_all), ("level 1", self.errors_level1)],
+                    self.noise_floor, levels, freqs,
+                )  # fmt: skip
             if self.no_clustering is not None:
                 tables["table1_no_clustering"] = table1(
                     self.no_clustering.errors_all,
                     levels,
                     freqs,
                     spreads=self.no_clustering.spreads_all,
+                    floor=self.no_clustering.noise_floor,
                 )
         if self.held_out_errors:
             tables["validation_errors"] = held_out_table(self.held_out_errors)
@@ -261,6 +271,8 @@ class IdentificationResult:
                 # Table 1's ± (same rows; null where undefined: one period, a diverged PNLSS).
                 "all_levels_std": _spread_rows(self.spreads_all),
                 "level1_std": _spread_rows(self.spreads_level1),
+                # Table 1's noise floor per sine (metrics.noise_floor): [[level, freq_hz, floor]].
+                "noise_floor": [[lv, f, v] for (lv, f), v in self.noise_floor.items()],
                 # Table 1's estimation spread (config.bootstrap; null rows where not run).
                 "bootstrap_replicates": None
                 if self.bootstrap is None
@@ -278,6 +290,7 @@ class IdentificationResult:
             msg.TABLE1: {
                 msg.TABLE1_ALL_LEVELS: markdown("table1_all_levels"),
                 msg.TABLE1_LEVEL1: markdown("table1_level1"),
+                msg.TABLE1_FLOOR_RATIOS: markdown("table1_floor_ratios"),
                 msg.TABLE1_NO_CLUSTERING: markdown("table1_no_clustering"),
                 msg.TABLE1_HELD_OUT: markdown("validation_errors"),
             },

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 TABLE1_MODELS = ("BLA FRF", "BLA SS", "PNLSS")
+FLOOR_ROW = "noise floor"  # Table 1's last row (metrics.noise_floor)
 
 
 def _column_name(level: str, freq: float) -> str:
@@ -28,6 +29,7 @@ def table1(
     spreads: Mapping[tuple[str, str, float], float] | None = None,
     estimation_spreads: Mapping[tuple[str, str, float], float] | None = None,
     estimation_means: Mapping[tuple[str, str, float], float] | None = None,
+    floor: Mapping[tuple[str, float], float] | None = None,
 ) -> tuple[str, str]:
     """The paper's Table 1: relative RMS errors, rows = models, columns = levels × frequencies.
 
@@ -49,6 +51,8 @@ def table1(
         estimation_means: the same keys: the bootstrap refits' mean error (the mean minus the
             cell is the bootstrap's bias estimate). In the CSV only, as a "<column> estimation
             mean" column after the "<column> estimation std" one (with ``estimation_spreads``).
+        floor: {(level, freq_hz): noise floor} (metrics.noise_floor): with it (even empty) the
+            table ends with a "noise floor" row, blank where a sine has fewer than 2 periods.
 
     Returns:
         (markdown, csv_text). Columns: "model", then "<level> <freq> Hz" for each level, and
@@ -62,6 +66,9 @@ def table1(
             not in the layout (a typo would otherwise drop a result silently).
     """
     freqs_arr = np.asarray(freqs, dtype=float)
+    if floor is not None:
+        models = (*models, FLOOR_ROW)
+        errors = {**errors, **{(FLOOR_ROW, lv, f): v for (lv, f), v in floor.items()}}
 
     def place(values: Mapping[tuple[str, str, float], float]) -> dict[tuple[str, str, int], float]:
         cells: dict[tuple[str, str, int], float] = {}
@@ -124,6 +131,39 @@ def table1(
     writer.writerow(header_csv)
     writer.writerows(rows_csv)
     return markdown, buffer.getvalue()
+
+
+def floor_ratio_table(
+    tables: Sequence[tuple[str, Mapping[tuple[str, str, float], float]]],
+    floor: Mapping[tuple[str, float], float],
+    levels: Sequence[str],
+    freqs: Sequence[float],
+    models: Sequence[str] = TABLE1_MODELS,
+    digits: int = 2,
+) -> tuple[str, str]:
+    """Each Table 1 cell divided by its sine's noise floor (1: as good as the data allow), as
+    (Markdown, CSV); one row per model of each table, named "<model> (<table>)".
+
+    Args:
+        tables: (label, errors) per Table 1 variant, e.g. [("all levels", errors_all)], the
+            errors keyed as `table1`'s.
+        floor: {(level, freq_hz): noise floor}.
+        levels, freqs, models, digits: as `table1`'s.
+    """
+    ratios: dict[tuple[str, str, float], float] = {}
+    rows: list[str] = []
+    for label, errors in tables:
+        for model in models:
+            row = f"{model} ({label})"
+            cells = {
+                (row, lv, f): e / floor[(lv, f)]
+                for (m, lv, f), e in errors.items()
+                if m == model and floor.get((lv, f), 0.0) > 0
+            }
+            if cells:
+                rows.append(row)
+                ratios.update(cells)
+    return table1(ratios, levels, freqs, models=rows, digits=digits)
 
 
 def clustering_markdown(effect: Mapping[str, Any]) -> str:

@@ -11,6 +11,7 @@ from . import model_message as msg
 from .data import PeriodicData
 from .dataset import Dataset, SineData
 from .metrics import (
+    noise_floor,
     predict_bla_sine,
     relative_rms_error,
     relative_rms_error_spread,
@@ -27,6 +28,7 @@ def validate(dataset: Dataset, result: IdentificationResult) -> None:
     result.spreads_all.clear()
     result.spreads_level1.clear()
     result.predictions.clear()
+    result.noise_floor.clear()
     for rec in dataset.sines:
         validate_sine(rec, result)
     result.held_out_errors = held_out_errors(result)
@@ -49,6 +51,8 @@ def validate_sine(rec: SineData, result: IdentificationResult) -> None:
     f = round(rec.frequency_hz, 6)
     y_mean, u_mean = float(np.mean(rec.y)), float(np.mean(rec.u))
     preds: dict[str, np.ndarray] = {}
+    if len(rec.y) >= 2 * rec.samples_per_period:
+        result.noise_floor[(name, f)] = noise_floor(rec.y, rec.samples_per_period)
 
     def score(
         errors: dict[tuple[str, str, float], float],

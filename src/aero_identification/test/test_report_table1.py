@@ -292,3 +292,72 @@ def test_table1_with_estimation_spreads_shows_both() -> None:
     assert all(with_mean[m][k] == v for m, row in table.items() for k, v in row.items())
     with pytest.raises(ValueError, match="not in the table layout"):
         table1(errors, LEVELS, FREQS, estimation_spreads={("PNLSS", "low", 0.5): 0.01})
+
+
+def test_noise_floor_recovers_the_noise_of_a_periodic_record() -> None:
+    from aero_identification.metrics import noise_floor
+
+    rng = np.random.default_rng(3)
+    n, periods, sigma = 400, 20, 0.05
+    t = np.arange(n * periods)
+    g = np.sin(2 * np.pi * t / n) + 0.3 * np.sin(6 * np.pi * t / n) ** 2  # periodic response
+    y = g + sigma * rng.standard_normal(g.size)
+    spread = np.sqrt(np.mean((y - y.mean()) ** 2))
+    floor = noise_floor(y, n)
+    # The floor estimates sigma / rms(y − mean y) (8000 noise samples: within a few per cent) …
+    assert floor == pytest.approx(sigma / spread, rel=0.03)
+    # … which is the true periodic response's own error: no model of α does better.
+    assert floor == pytest.approx(relative_rms_error(y, g), rel=0.03)
+    # Without the √(P/(P−1)) factor it would be the period mean's error, √(19/20) lower.
+    mean_period = np.tile(y.reshape(periods, n).mean(axis=0), periods)
+    assert relative_rms_error(y, mean_period) == pytest.approx(
+        floor * np.sqrt((periods - 1) / periods), rel=1e-12
+    )
+    assert noise_floor(np.tile(g[:n], 3), n) == pytest.approx(0.0, abs=1e-12)  # noise-free
+    with pytest.raises(ValueError, match="at least 2 periods"):
+        noise_floor(y[:n], n)
+    with pytest.raises(ValueError, match="whole periods"):
+        noise_floor(y[:-1], n)
+
+
+def test_noise_floor_row_and_ratios_in_tables_json_and_summary() -> None:
+    from aero_identification.report import summary_markdown
+    from aero_identification.validation import validate_sine
+
+    rng = np.random.default_rng(4)
+    n, periods = 50, 8
+    t = np.arange(n * periods)
+    u = 10.0 + 4.0 * np.sin(2 * np.pi * t / n)
+    y = 0.1 * (u - 10.0) + 1.0 + 0.02 * rng.standard_normal(t.size)
+    sine = SineData("sine 1 Hz at 10°", 1.0, 10.0, n, u, y)
+    result = IdentificationResult(config=IdentificationConfig(), fs=float(n), sines_planned=True)
+    result.levels["low"] = LevelResult(LevelRecord("low", None, key="1", offset_deg=10.0))
+    result.pnlss_all = _Gain(0.12, 0.0)  # a gain 20 % off: well above the floor
+    validate_sine(sine, result)
+    floor = result.noise_floor[("low", 1.0)]
+    assert 0.05 < floor < 0.2
+    error = result.errors_all[("PNLSS", "low", 1.0)]
+    assert error > 1.5 * floor
+
+    tables = result.tables()
+    md, csv_text = tables["table1_all_levels"]
+    assert md.strip().splitlines()[-1] == f"| noise floor | {floor:.2f} |"
+    row = next(r for r in csv.DictReader(io.StringIO(csv_text)) if r["model"] == "noise floor")
+    assert float(row["low 1 Hz"]) == floor and row["low 1 Hz std"] == ""
+    assert "| noise floor |" in tables["table1_level1"][0]  # the same sines, the same floor
+    ratios = {r["model"]: r for r in csv.DictReader(io.StringIO(tables["table1_floor_ratios"][1]))}
+    assert set(ratios) == {"PNLSS (all levels)"}  # level 1 fitted nothing here
+    assert float(ratios["PNLSS (all levels)"]["low 1 Hz"]) == pytest.approx(error / floor)
+    payload = result.to_json_dict()
+    assert payload["errors"]["noise_floor"] == [["low", 1.0, floor]]
+    assert "| noise floor |" in payload["table1"]["markdown"]
+    assert f"{error / floor:.2f}" in payload["table1"]["markdown_floor_ratios"]
+    result.pnlss_all = None  # the stand-in has no structure for the summary's PNLSS line
+    summary = summary_markdown(result)
+    assert "divided by the noise floor" in summary and f"| {error / floor:.2f} |" in summary
+    # A sine of one period has no floor: the row is there, its cell blank.
+    result.noise_floor.clear()
+    validate_sine(dataclasses.replace(sine, u=u[:n], y=y[:n]), result)
+    assert result.noise_floor == {}
+    assert "| noise floor | – |" in result.tables()["table1_all_levels"][0]
+    assert "table1_floor_ratios" not in result.tables()

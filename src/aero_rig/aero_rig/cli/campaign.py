@@ -412,6 +412,10 @@ def print_results(run_dir: Path, summary: dict[str, Any], bad: dict[str, int]) -
     if level1.exists():
         print("\nTable 1, trained on level 1 only (the paper's variant):")
         print(level1.read_text())
+    ratios = run_dir / "table1_floor_ratios.md"
+    if ratios.exists():
+        print("\nTable 1 divided by each sine's noise floor (1: as good as the data allow):")
+        print(ratios.read_text())
     clustering = run_dir / "clustering.md"
     if clustering.exists():
         print("\nWhat the period clustering changed (clustering.md, table1_no_clustering.md):")

@@ -259,6 +259,8 @@ def _load_records(args: argparse.Namespace) -> Any:
 TITLES = {
     "table1_all_levels": "Table 1, trained on all levels (estimation: one realization per level):",
     "table1_level1": "Table 1, trained on level 1 only (the paper's variant):",
+    "table1_floor_ratios": "Table 1 divided by each sine's noise floor (1: as good as the data "
+    "allow):",
     "table1_no_clustering": "Table 1, trained on all levels, without clustering (every valid "
     "period):",
     "validation_errors": "Validation on held-out levels (relative RMS error "
