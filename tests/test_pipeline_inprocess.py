@@ -511,3 +511,42 @@ def test_scan_scheduler_runs_the_scan_and_the_bootstrap_or_says_it_cannot_be_rea
         assert any(w.startswith(what) for w in lost.warnings), lost.warnings
     assert lost.scan is None and lost.bootstrap is None
     assert lost.errors_all and lost.linear_level1 is not None
+
+
+def test_the_semi_empirical_baseline_is_calibrated_on_the_plans_sweep(campaign, tmp_path) -> None:
+    from aero_identification.report import write_report
+    from multisine_gen.plan import BaselineSweep
+
+    plan = dataclasses.replace(campaign[0], baseline=BaselineSweep(peak_deg=28.0, rate_deg_s=2.0))
+    run = simulate_plan(plan, seed=0, params=wing_params_preset("repeatable_stall"))
+    asm = CampaignAssembler(run.plan, T0)
+    asm.add_many("u", run.stamps_ns, run.pitch_deg)
+    asm.add_many("y", run.stamps_ns, run.cl)
+    result = identify(asm, ACCOUNT_CONFIG, final=True)
+    model = result.beddoes_leishman
+    assert model is not None and result.quasi_static is not None
+    # The static curve from the sweep: the paper's slope below the stall (0.104/°, the wing's).
+    assert model.static.slope_per_deg == pytest.approx(0.104, rel=0.1)
+    cells = {k: v for k, v in result.errors_all.items() if k[0] == "Beddoes-Leishman"}
+    assert len(cells) == 4 and all(v < 1.0 for v in cells.values())  # better than the mean
+    assert not any(k[0] == "Beddoes-Leishman" for k in result.errors_level1)
+    md = result.tables()["table1_all_levels"][0]
+    assert (
+        "| Beddoes-Leishman |" in md
+        and "| Beddoes-Leishman |" not in (result.tables()["table1_level1"][0])
+    )
+    from aero_identification import model_message as mm
+
+    for prediction in result.predictions:
+        assert mm.BEDDOES_LEISHMAN in dict(mm.prediction_series(prediction))
+    written = write_report(result, tmp_path)
+    models = json.loads((tmp_path / "models.json").read_text())
+    assert models["models"]["beddoes_leishman"]["t_f_s"] == model.t_f_s
+    assert "quasi_static" in written
+    assert not any("Beddoes-Leishman" in w for w in result.warnings)
+    # The same campaign without its sweep: no row, and one warning says why.
+    plain = identify(_assemble(campaign), ACCOUNT_CONFIG, final=True)
+    assert plain.beddoes_leishman is None
+    assert "| Beddoes-Leishman |" not in plain.tables()["table1_all_levels"][0]
+    assert sum("Beddoes-Leishman baseline not fitted: the source has no quasi-static sweep" in w
+               for w in plain.warnings) == 1  # fmt: skip

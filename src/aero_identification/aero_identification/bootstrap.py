@@ -33,9 +33,10 @@ from typing import Any
 
 import numpy as np
 
+from .beddoes_leishman import BeddoesLeishman, fit_beddoes_leishman
 from .config import IdentificationConfig
 from .data import PeriodicData
-from .dataset import Dataset
+from .dataset import Dataset, QuasiStaticSweep
 from .level_models import level_models
 from .models import LinearStateSpace, PNLSSModel
 from .pnlss_training import fit_client, level_weights, pnlss_sets, scan_levels
@@ -309,6 +310,8 @@ def _estimation_spread(
     for rep in replicates:
         if same:
             rep.pnlss_level1 = rep.pnlss_all
+        if result.beddoes_leishman is not None and dataset.quasi_static is not None:
+            rep.beddoes_leishman = _refit_semi_empirical(dataset.quasi_static, rep)
         validate(dataset, rep)
         replicates_all.append(dict(rep.errors_all))
         replicates_level1.append(dict(rep.errors_level1))
@@ -325,6 +328,22 @@ def _estimation_spread(
         failed_all=failed_all,
         failed_level1=failed_level1,
     )
+
+
+def _refit_semi_empirical(
+    sweep: QuasiStaticSweep, rep: IdentificationResult
+) -> BeddoesLeishman | None:
+    """The Beddoes–Leishman baseline refitted on a replicate's estimation periods (the sweep is
+    not resampled: it calibrates the static curves); None where the fit fails (its cells then
+    count as failed)."""
+    levels = [
+        r for r in rep.levels.values() if r.role == "estimation" and r.record.data is not None
+    ]
+    try:
+        train, held, _ = pnlss_sets(levels, rep.config)
+        return fit_beddoes_leishman(sweep, train, held)
+    except ValueError:
+        return None
 
 
 def _warn_failed_refits(result: IdentificationResult, replicates: int) -> None:

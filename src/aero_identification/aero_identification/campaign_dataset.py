@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .data import PeriodicData
-from .dataset import Dataset, LevelRecord, SineData
+from .dataset import Dataset, LevelRecord, QuasiStaticSweep, SineData
 from .period_assembly import CampaignAssembler, PeriodBlock
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
@@ -158,6 +158,18 @@ def campaign_dataset(
         if (started or rec.mark) and (final or not in_progress):
             dataset.excluded_sines.append(f"{rec.name}: {rec.problem()}")
             dataset.warnings.append(f"{rec.name}: not used for validation ({rec.problem()})")
+    sweep = assembler.baseline_sweep(final)
+    if sweep is not None:
+        empty = (np.empty(0), np.empty(0))
+        (u_up, y_up), (u_down, y_down) = sweep.get("up", empty), sweep.get("down", empty)
+        dataset.quasi_static = QuasiStaticSweep(
+            u_up, y_up, u_down, y_down, sweep["rate_deg_s"], sweep["left_out"]
+        )
+        if sweep["left_out"]:
+            dataset.warnings.append(
+                f"quasi-static sweep: {sweep['left_out']} of its samples missing, duplicated or "
+                "touched by an anomaly, left out"
+            )
     dataset.quality = data_quality(assembler, dataset, final)
     dataset.experiment = assembler.experiment_account(names)
     return dataset

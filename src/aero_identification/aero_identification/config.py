@@ -78,6 +78,13 @@ class IdentificationConfig:
     # The paper used 50 iterations for its order scan.
     max_iter: int = hyper(100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000)
     pnlss: bool = hyper(True, "fit the PNLSS models (false: clustering, BLA and linear models)")
+    # The semi-empirical baseline (beddoes_leishman.py): a Table 1 row, never a candidate of
+    # the selected model; fitted only when the source measured a quasi-static sweep.
+    semi_empirical: bool = hyper(
+        True,
+        "fit the Beddoes-Leishman baseline (static curves from the quasi-static sweep, time "
+        "constants on the estimation data)",
+    )
     # PNLSS training and held-out data (pnlss_training.pnlss_sets): the held-out realization chooses
     # the iterate and scores the scan's candidates; every other realization trains.
     validation_realization: int = hyper(

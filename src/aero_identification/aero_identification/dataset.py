@@ -87,6 +87,61 @@ class SineData:
     y: np.ndarray  # (n,) output
 
 
+@dataclass(frozen=True, eq=False)
+class QuasiStaticSweep:
+    """The measured quasi-static baseline sweep (the plan's baseline): α [deg] and C_l on the
+    pitch-up and the pitch-down branch, the samples in time order ([PitchingWing] Fig. 5).
+
+    Attributes:
+        alpha_up, cl_up, alpha_down, cl_down: the usable samples of each branch.
+        rate_deg_s: the sweep's pitch rate.
+        left_out: sweep samples missing, duplicated, non-finite or touched by an anomaly (left
+            out, never patched).
+    """
+
+    alpha_up: np.ndarray
+    cl_up: np.ndarray
+    alpha_down: np.ndarray
+    cl_down: np.ndarray
+    rate_deg_s: float
+    left_out: int = 0
+
+    def branch(self, direction: str, bin_deg: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+        """One branch as a curve: the mean C_l in α bins of ``bin_deg`` (bins with no sample
+        dropped), as (bin centres [deg], mean C_l), α ascending."""
+        if direction not in ("up", "down"):
+            raise ValueError(f"direction must be 'up' or 'down'; got {direction!r}")
+        alpha, cl = (
+            (self.alpha_up, self.cl_up) if direction == "up" else (self.alpha_down, self.cl_down)
+        )
+        return binned_mean(alpha, cl, bin_deg)
+
+    def static_curve(self, bin_deg: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+        """The static lift curve: per α bin the mean of the two branches' binned curves (where
+        they differ, a hysteresis, their average; where only one reaches, that one)."""
+        a_up, c_up = self.branch("up", bin_deg)
+        a_down, c_down = self.branch("down", bin_deg)
+        alpha = np.union1d(a_up, a_down)
+        total, count = np.zeros(alpha.size), np.zeros(alpha.size)
+        for a, c in ((a_up, c_up), (a_down, c_down)):
+            at = np.searchsorted(alpha, a)
+            total[at] += c
+            count[at] += 1
+        return alpha, total / count
+
+
+def binned_mean(x: np.ndarray, y: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of y in bins of ``width`` along x (bin edges at multiples of width), as (bin
+    centres, means) for the bins that hold a sample."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if x.size == 0:
+        return np.empty(0), np.empty(0)
+    index = np.floor(x / width).astype(np.int64)
+    bins, inverse, counts = np.unique(index, return_inverse=True, return_counts=True)
+    sums = np.bincount(inverse, weights=y)
+    return (bins + 0.5) * width, sums / counts
+
+
 @dataclass
 class Dataset:
     """Levels (lowest first), validation sines and the data-quality account of one source.
@@ -106,6 +161,8 @@ class Dataset:
         experiment: a campaign's executed plan against the planned one (multisine time per
             level, the adaptive run's decisions; CampaignAssembler.experiment_account); empty
             for records.
+        quasi_static: the measured quasi-static sweep when the source has one (a campaign
+            whose plan has a baseline, once it is measured); None for records.
     """
 
     fs: float
@@ -117,6 +174,7 @@ class Dataset:
     warnings: list[str] = field(default_factory=list)
     source: str = ""
     experiment: dict[str, Any] = field(default_factory=dict)
+    quasi_static: QuasiStaticSweep | None = None
 
     @property
     def clean(self) -> bool:

@@ -324,6 +324,35 @@ class CampaignAssembler:
             else:
                 self.sines[slot.key].mark = text
 
+    def baseline_sweep(self, final: bool) -> dict[str, Any] | None:
+        """The plan's quasi-static baseline sweep as measured, once both channels are past its
+        end (or ``final``): per branch ("up", "down") the plan samples that arrived exactly once,
+        finite and untouched by an anomaly, as ``{branch: (u, y)}``, with ``rate_deg_s`` and
+        ``left_out`` (how many of its samples were not usable). None without a baseline in the
+        plan, before it has been measured, or with no usable sample."""
+        segments = [s for s in self.plan.segments if s.kind == "baseline"]
+        if not segments:
+            return None
+        end = max(s.start_k + s.length - 1 for s in segments)
+        if not final:
+            for coverage in self.coverage.values():
+                received = np.flatnonzero(coverage[end:])
+                if received.size == 0:
+                    return None  # the streams have not passed the sweep's last sample yet
+        out: dict[str, Any] = {"rate_deg_s": float(segments[0].rate_deg_s or 0.0), "left_out": 0}
+        for seg in segments:
+            k = np.arange(seg.start_k, seg.start_k + seg.length)
+            u, y = self.values["u"][k], self.values["y"][k]
+            ok = (self.coverage["u"][k] == 1) & (self.coverage["y"][k] == 1)
+            ok &= np.isfinite(u) & np.isfinite(y)
+            for first, last, _text in self.anomalies.values():
+                ok &= ~((k >= first) & (k <= (last if last is not None else k[-1])))
+            out["left_out"] += int(np.sum(~ok))
+            out[str(seg.direction)] = (u[ok].copy(), y[ok].copy())
+        if not any(len(out.get(b, ((),))[0]) for b in ("up", "down")):
+            return None
+        return out
+
     def plan_anomalies(self) -> list[str]:
         """The anomalies that touch the plan's samples (those after its end are harmless)."""
         out = []

@@ -35,11 +35,15 @@ dropped), like the measured data.
 """
 
 import dataclasses
+import hashlib
 import time
 from collections.abc import Sequence
 from concurrent.futures import Future, wait
 from typing import Any
 
+import numpy as np
+
+from .beddoes_leishman import fit_beddoes_leishman
 from .bootstrap import estimation_bootstrap
 from .clustering_ablation import (
     ablation_config,
@@ -52,7 +56,7 @@ from .config import IdentificationConfig
 from .dataset import Dataset
 from .level_models import level_models
 from .pnlss import one_blas_thread
-from .pnlss_training import fit_levels, level_signature, scan_levels
+from .pnlss_training import fit_levels, level_signature, pnlss_sets, scan_levels
 from .results import IdentificationResult, LevelResult, Log
 from .validation import validate
 
@@ -60,6 +64,7 @@ from .validation import validate
 REUSED = (
     "levels", "linear_level1", "pnlss_all", "scan", "no_clustering", "pnlss_level1",
     "level1_signature", "pnlss_start_level", "pnlss_held_out", "final_models",
+    "beddoes_leishman", "semi_empirical_signature",
 )  # fmt: skip
 
 
@@ -151,6 +156,9 @@ def _identify(
         if models_from is None:
             # 3. PNLSS on every estimation level, its iterate chosen on their held-out periods.
             _fit_pnlss_models(dataset, result, config, final_models, previous, client, say)
+            # 3b. The semi-empirical baseline, from the quasi-static sweep and the same sets.
+            if config.semi_empirical:
+                _fit_semi_empirical(dataset, result, config, previous, say)
         # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
         validate(dataset, result)
         if final and config.bootstrap > 0:
@@ -247,6 +255,53 @@ def _fit_pnlss_models(
     result.timings_s["pnlss"] = time.perf_counter() - t0
 
 
+def _fit_semi_empirical(
+    dataset: Dataset,
+    result: IdentificationResult,
+    config: IdentificationConfig,
+    previous: IdentificationResult | None,
+    say: Log,
+) -> None:
+    """The Beddoes–Leishman baseline (beddoes_leishman.py) on the PNLSS's training and held-out
+    sets, its static curves from the quasi-static sweep; without a sweep, one warning says why
+    its Table 1 row is absent. The previous refit's model is reused when its sweep and sets are
+    the same (the fit is deterministic)."""
+    t0 = time.perf_counter()
+    ready = [
+        r for r in result.levels.values() if r.role == "estimation" and r.record.data is not None
+    ]
+    if dataset.quasi_static is None:
+        result.warnings.append(
+            "Beddoes-Leishman baseline not fitted: the source has no quasi-static sweep (its "
+            "static lift curve calibrates the model), so no table has a row for it"
+        )
+        return
+    if not ready:
+        return
+    train, held, _ = pnlss_sets(ready, config)
+    digest = hashlib.sha256()
+    for part in (dataset.quasi_static.alpha_up, dataset.quasi_static.cl_up,
+                 dataset.quasi_static.alpha_down, dataset.quasi_static.cl_down, train.u, train.y,
+                 *((held.u, held.y) if held is not None else ())):  # fmt: skip
+        digest.update(np.ascontiguousarray(part).tobytes())
+    result.semi_empirical_signature = digest.digest()
+    if (
+        previous is not None
+        and previous.beddoes_leishman is not None
+        and previous.semi_empirical_signature == result.semi_empirical_signature
+    ):
+        result.beddoes_leishman = previous.beddoes_leishman
+        return
+    try:
+        result.beddoes_leishman = fit_beddoes_leishman(dataset.quasi_static, train, held)
+    except ValueError as exc:
+        result.warnings.append(f"Beddoes-Leishman baseline not fitted: {exc}")
+        return
+    result.timings_s["semi_empirical"] = time.perf_counter() - t0
+    say(f"Beddoes-Leishman baseline: {result.beddoes_leishman.describe()}, "
+        f"{result.timings_s['semi_empirical']:.1f} s")  # fmt: skip
+
+
 def _ablation_result(
     dataset: Dataset,
     result: IdentificationResult,
@@ -290,6 +345,7 @@ def _finish(dataset: Dataset, result: IdentificationResult, t_start: float) -> N
     result.excluded_sines = list(dataset.excluded_sines)
     result.data_quality = dataset.quality
     result.experiment = dataset.experiment
+    result.quasi_static = dataset.quasi_static
     result.timings_s["total"] = time.perf_counter() - t_start
 
 

@@ -6,7 +6,7 @@ backend switch), so they can be written from nodes and tests alike.
 """
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 
 from aero_identification import model_message as msg
 from aero_identification.bla import BLA
+from aero_identification.dataset import QuasiStaticSweep
 from aero_identification.quality import data_quality_lines
 from aero_identification.results import IdentificationResult, bla_summary, modal_frequencies
 from aero_identification.tables import TABLE1_MODELS, clustering_markdown, table1
@@ -195,6 +196,55 @@ def plot_cl_alpha(
     return _finish(fig, ax, path, "α [°]", "C_l", title)
 
 
+def plot_quasi_static(
+    sweep: QuasiStaticSweep,
+    path: str | Path,
+    levels: Sequence[tuple[str, float, float]] = (),
+    sines: Sequence[tuple[str, float, float]] = (),
+    title: str = "Quasi-static lift and the excitation ranges",
+) -> Path:
+    """The quasi-static C_l–α curve, pitch-up and pitch-down, with each multisine level's
+    α mean ± std as a filled band and each sine's α range as a dashed band (paper Fig. 5).
+
+    Args:
+        sweep: the measured sweep; each branch drawn as its mean C_l per 0.25° of α.
+        levels: (name, α mean, α std) per multisine level.
+        sines: (name, α min, α max) per validation sine.
+    """
+    fig = Figure(figsize=(7, 5), layout="constrained")
+    ax = fig.subplots()
+    for i, (name, mean, std) in enumerate(levels):
+        ax.axvspan(mean - std, mean + std, color=f"C{i % 10}", alpha=0.18,
+                   label=f"multisine {name}: {mean:.1f}° ± {std:.1f}°")  # fmt: skip
+    for i, (name, lo, hi) in enumerate(sines):
+        for edge in (lo, hi):
+            ax.axvline(edge, color=f"C{i % 10}", ls="--", lw=0.9,
+                       label=f"{name}: {lo:.1f}°–{hi:.1f}°" if edge == lo else None)  # fmt: skip
+    for direction, color in (("up", "k"), ("down", "tab:red")):
+        alpha, cl = sweep.branch(direction)
+        label = f"quasi-static, pitch-{direction} ({sweep.rate_deg_s:.2g}°/s)"
+        if alpha.size:
+            ax.plot(alpha, cl, "-", lw=1.3, color=color, label=label)
+    return _finish(fig, ax, path, "α [°]", "C_l", title)
+
+
+def fig5_bands(
+    result: IdentificationResult,
+) -> tuple[list[tuple[str, float, float]], list[tuple[str, float, float]]]:
+    """Fig. 5's bands: (level, α mean, α std) of every level's periods and (sine, α min, α max)
+    of every validation sine, from the result's levels and predictions."""
+    levels = [
+        (lv.name, float(np.mean(lv.record.data.u)), float(np.std(lv.record.data.u)))
+        for lv in result.levels.values()
+        if lv.record.data is not None
+    ]
+    sines = []
+    for pred in result.predictions:
+        alpha = np.asarray(pred[msg.ALPHA_DEG], dtype=float)
+        sines.append((str(pred[msg.NAME]), float(alpha.min()), float(alpha.max())))
+    return levels, sines
+
+
 def plot_scan(scan: Any, path: str | Path, title: str = "PNLSS structure scan") -> Path:
     """Validation error against the number of parameters, one marker per candidate
     (scan.ScanResult); the kept candidate circled, the one-standard-error band shaded."""
@@ -249,10 +299,19 @@ def write_report(
     """The one report of `pipeline.identify`, whatever the source: models.json, the tables
     (Table 1 when there were sines, validation_errors when there were held-out levels; Markdown
     and CSV), data_quality.md, summary.md, clustering.md (with the ablation), the structure
-    scan, and the figures of the paper's Figs. 6-9 (PNG)."""
+    scan, and the figures of the paper's Figs. 5-9 (PNG; Fig. 5, quasi_static_lift.png, when
+    the source measured a quasi-static sweep, whose static curve the C_l–α figures then draw
+    unless ``quasi_static`` gives another)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Path] = {}
+    if result.quasi_static is not None:
+        levels, sines = fig5_bands(result)
+        written["quasi_static"] = plot_quasi_static(
+            result.quasi_static, out / "quasi_static_lift.png", levels, sines
+        )
+        if quasi_static is None:
+            quasi_static = result.quasi_static.static_curve()
     path = out / "models.json"
     path.write_text(json.dumps(result.to_json_dict(), indent=1, allow_nan=True))
     written["models"] = path

@@ -10,14 +10,21 @@ from typing import Any
 import numpy as np
 
 from . import model_message as msg
+from .beddoes_leishman import BeddoesLeishman
 from .bla import BLA
 from .clustering import ClusterResult
 from .config import IdentificationConfig
-from .dataset import LevelRecord
+from .dataset import LevelRecord, QuasiStaticSweep
 from .models import LinearStateSpace, PNLSSModel
 from .quality import data_quality_note
 from .scan import ScanResult
-from .tables import floor_ratio_table, held_out_table, table1
+from .tables import (
+    SEMI_EMPIRICAL_ROW,
+    TABLE1_MODELS,
+    floor_ratio_table,
+    held_out_table,
+    table1,
+)
 
 
 @dataclass
@@ -167,6 +174,11 @@ class IdentificationResult:
     clustering_effect: dict[str, Any] = field(default_factory=dict)
     # Table 1's estimation spread (config.bootstrap > 0, final identification only).
     bootstrap: EstimationSpread | None = None
+    # The semi-empirical baseline (beddoes_leishman.py; config.semi_empirical, with a sweep).
+    beddoes_leishman: BeddoesLeishman | None = None
+    semi_empirical_signature: bytes = b""  # which sweep and sets it was fitted on
+    # The measured quasi-static sweep (Dataset.quasi_static): Fig. 5, the semi-empirical model.
+    quasi_static: QuasiStaticSweep | None = None
 
     @property
     def clean(self) -> bool:
@@ -189,8 +201,10 @@ class IdentificationResult:
         tables: dict[str, tuple[str, str]] = {}
         if self.sines_planned or freqs:
             boot = self.bootstrap
+            models_all = table1_models(self.errors_all)
             tables["table1_all_levels"] = table1(
-                self.errors_all, levels, freqs, spreads=self.spreads_all, floor=self.noise_floor,
+                self.errors_all, levels, freqs, models=models_all, spreads=self.spreads_all,
+                floor=self.noise_floor,
                 estimation_spreads=None if boot is None else boot.spreads_all,
                 estimation_means=None if boot is None else boot.means_all,
             )  # fmt: skip
@@ -209,14 +223,15 @@ class IdentificationResult:
                     tables[key] = (boot.note(errors, level1) + md, csv_text)
             if self.noise_floor:
                 tables["table1_floor_ratios"] = floor_ratio_table(
-                    [("all levels", self.errors_all), ("level 1", self.errors_level1)],
-                    self.noise_floor, levels, freqs,
+                    [("all-levels table", self.errors_all), ("level-1 table", self.errors_level1)],
+                    self.noise_floor, levels, freqs, models=models_all,
                 )  # fmt: skip
             if self.no_clustering is not None:
                 tables["table1_no_clustering"] = table1(
                     self.no_clustering.errors_all,
                     levels,
                     freqs,
+                    models=table1_models(self.no_clustering.errors_all),
                     spreads=self.no_clustering.spreads_all,
                     floor=self.no_clustering.noise_floor,
                 )
@@ -260,6 +275,9 @@ class IdentificationResult:
                 "pnlss_all_levels": self.pnlss_all.to_dict() if self.pnlss_all else None,
                 "pnlss_level1": self.pnlss_level1.to_dict() if self.pnlss_level1 else None,
                 "bla_ss_level1": self.linear_level1.to_dict() if self.linear_level1 else None,
+                "beddoes_leishman": None
+                if self.beddoes_leishman is None
+                else self.beddoes_leishman.to_dict(),
             },
             "pnlss": {
                 "initial_linear_level": self.pnlss_start_level,
@@ -295,6 +313,9 @@ class IdentificationResult:
                 msg.TABLE1_HELD_OUT: markdown("validation_errors"),
             },
             "clustering_effect": self.clustering_effect,
+            "quasi_static": None
+            if self.quasi_static is None
+            else quasi_static_json(self.quasi_static),
             msg.PREDICTIONS: [_trim_prediction(p) for p in self.predictions],
             msg.WARNINGS: self.warnings,
             msg.DATA_QUALITY: self.data_quality,
@@ -309,6 +330,27 @@ class IdentificationResult:
                 "workers": self.scan.workers,
             },
         }
+
+
+def table1_models(errors: Mapping[tuple[str, str, float], float]) -> tuple[str, ...]:
+    """Table 1's rows: TABLE1_MODELS, and the semi-empirical baseline when it was scored."""
+    baseline = any(model == SEMI_EMPIRICAL_ROW for model, _, _ in errors)
+    return (*TABLE1_MODELS, SEMI_EMPIRICAL_ROW) if baseline else TABLE1_MODELS
+
+
+QUASI_STATIC_BIN_DEG = 0.25  # models.json's quasi-static curves: mean C_l per α bin
+
+
+def quasi_static_json(sweep: QuasiStaticSweep) -> dict[str, Any]:
+    """The sweep's two branches as curves (mean C_l per QUASI_STATIC_BIN_DEG bin of α)."""
+    out: dict[str, Any] = {"rate_deg_s": sweep.rate_deg_s, "left_out": sweep.left_out}
+    for direction in ("up", "down"):
+        alpha, cl = sweep.branch(direction, QUASI_STATIC_BIN_DEG)
+        out[direction] = {
+            "alpha_deg": [round(float(a), 4) for a in alpha],
+            "cl": [round(float(c), 5) for c in cl],
+        }
+    return out
 
 
 def _spread_rows(spreads: dict[tuple[str, str, float], float]) -> list[list[Any]]:

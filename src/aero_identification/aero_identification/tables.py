@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 TABLE1_MODELS = ("BLA FRF", "BLA SS", "PNLSS")
+SEMI_EMPIRICAL_ROW = "Beddoes-Leishman"  # the all-levels table's baseline row, when fitted
 FLOOR_ROW = "noise floor"  # Table 1's last row (metrics.noise_floor)
 
 

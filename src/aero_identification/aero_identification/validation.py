@@ -18,6 +18,7 @@ from .metrics import (
     steady_state_response,
 )
 from .results import IdentificationResult, LevelResult
+from .tables import SEMI_EMPIRICAL_ROW
 
 __all__ = ["held_out_errors", "nearest_level", "record_error", "validate", "validate_sine"]
 
@@ -91,6 +92,10 @@ def validate_sine(rec: SineData, result: IdentificationResult) -> None:
         y_hat = steady_state_response(model, rec.u, rec.samples_per_period)
         score(errors, spreads, "PNLSS", y_hat, may_diverge=True)
         preds[key] = y_hat
+    if result.beddoes_leishman is not None:
+        y_hat = steady_state_response(result.beddoes_leishman, rec.u, rec.samples_per_period)
+        score(result.errors_all, result.spreads_all, SEMI_EMPIRICAL_ROW, y_hat, may_diverge=True)
+        preds[msg.BEDDOES_LEISHMAN] = y_hat
     result.predictions.append(
         {
             msg.NAME: f"sine {name} {rec.frequency_hz:g} Hz",

@@ -346,8 +346,8 @@ def test_noise_floor_row_and_ratios_in_tables_json_and_summary() -> None:
     assert float(row["low 1 Hz"]) == floor and row["low 1 Hz std"] == ""
     assert "| noise floor |" in tables["table1_level1"][0]  # the same sines, the same floor
     ratios = {r["model"]: r for r in csv.DictReader(io.StringIO(tables["table1_floor_ratios"][1]))}
-    assert set(ratios) == {"PNLSS (all levels)"}  # level 1 fitted nothing here
-    assert float(ratios["PNLSS (all levels)"]["low 1 Hz"]) == pytest.approx(error / floor)
+    assert set(ratios) == {"PNLSS (all-levels table)"}  # level 1 fitted nothing here
+    assert float(ratios["PNLSS (all-levels table)"]["low 1 Hz"]) == pytest.approx(error / floor)
     payload = result.to_json_dict()
     assert payload["errors"]["noise_floor"] == [["low", 1.0, floor]]
     assert "| noise floor |" in payload["table1"]["markdown"]
