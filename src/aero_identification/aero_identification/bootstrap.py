@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from .beddoes_leishman import BeddoesLeishman, fit_beddoes_leishman
+from .bspline_lpv import BSplineLPV, LpvSettings, fit_bspline_lpv
 from .config import IdentificationConfig
 from .data import PeriodicData
 from .dataset import Dataset, QuasiStaticSweep
@@ -312,6 +313,9 @@ def _estimation_spread(
             rep.pnlss_level1 = rep.pnlss_all
         if result.beddoes_leishman is not None and dataset.quasi_static is not None:
             rep.beddoes_leishman = _refit_semi_empirical(dataset.quasi_static, rep)
+        if result.lpv_all is not None:
+            rep.lpv_all = _refit_lpv(result.lpv_all, rep)
+        rep.selection = result.selection  # the estimate's class, as its structure is kept
         validate(dataset, rep)
         replicates_all.append(dict(rep.errors_all))
         replicates_level1.append(dict(rep.errors_level1))
@@ -343,6 +347,26 @@ def _refit_semi_empirical(
         train, held, _ = pnlss_sets(levels, rep.config)
         return fit_beddoes_leishman(sweep, train, held)
     except ValueError:
+        return None
+
+
+def _refit_lpv(kept: BSplineLPV, rep: IdentificationResult) -> BSplineLPV | None:
+    """The B-spline LPV model refitted on a replicate with the estimate's structure (knot
+    intervals, state degree); None where the fit fails (its cells then count as failed)."""
+    levels = [
+        r for r in rep.levels.values() if r.role == "estimation" and r.record.data is not None
+    ]
+    config = rep.config
+    settings = LpvSettings(
+        intervals=kept.intervals, state_degree=kept.state_degree, max_iter=config.lpv_max_iter,
+        weighting=config.lpv_weighting, stress=config.scan_stress,
+    )  # fmt: skip
+    if rep.linear_level1 is None or not levels:
+        return None
+    try:
+        train, held, _ = pnlss_sets(levels, config)
+        return fit_bspline_lpv(train, rep.linear_level1, settings, held)
+    except (ValueError, np.linalg.LinAlgError):
         return None
 
 

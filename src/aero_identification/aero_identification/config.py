@@ -78,6 +78,33 @@ class IdentificationConfig:
     # The paper used 50 iterations for its order scan.
     max_iter: int = hyper(100, "Levenberg-Marquardt iterations per PNLSS fit", min=0, max=1000)
     pnlss: bool = hyper(True, "fit the PNLSS models (false: clustering, BLA and linear models)")
+    # The second nonlinear model class (bspline_lpv.py): a state-space model whose
+    # coefficients are cubic B-splines of α, polynomial in the state; trained on the PNLSS's
+    # sets, its iterate chosen on the same held-out periods, and (with ``scan``) its structure
+    # by the same cross-validation over lpv_scan_intervals × lpv_scan_state_degrees. Table 1's
+    # "selected" row is whichever of it and the all-levels PNLSS is lower on the held-out
+    # periods. "relative" weighting: each training record by 1 / its output's variance, so the
+    # low offset counts as much as the stall (docs/results.md, "The second model class").
+    lpv: bool = hyper(True, "fit the B-spline LPV state-space model beside the PNLSS")
+    lpv_intervals: int = hyper(
+        8, "B-spline LPV: knot intervals over the training angles (single-structure fits)", min=1,
+        max=40,
+    )  # fmt: skip
+    lpv_state_degree: int = hyper(
+        3, "B-spline LPV: highest degree of the state monomials (1: linear in the state)", min=1,
+        max=5,
+    )  # fmt: skip
+    lpv_max_iter: int = hyper(60, "B-spline LPV: Levenberg-Marquardt iterations", min=0,
+                              max=1000)  # fmt: skip
+    lpv_weighting: str = hyper(
+        "relative", "B-spline LPV: weights of the training records", choices=("none", "relative")
+    )
+    lpv_scan_intervals: tuple[int, ...] = hyper(
+        (4, 8), "B-spline LPV scan: knot intervals", min=1, max=40
+    )
+    lpv_scan_state_degrees: tuple[int, ...] = hyper(
+        (1, 3), "B-spline LPV scan: highest state monomial degrees", min=1, max=5
+    )
     # The semi-empirical baseline (beddoes_leishman.py): a Table 1 row, never a candidate of
     # the selected model; fitted only when the source measured a quasi-static sweep.
     semi_empirical: bool = hyper(

@@ -78,14 +78,20 @@ BLA_SS_OWN: Final = "BLA SS (own level)"
 BLA_SS_LEVEL1: Final = "BLA SS (level 1)"
 PNLSS_ALL: Final = "PNLSS (all levels)"
 PNLSS_LEVEL1: Final = "PNLSS (level 1)"
+LPV_ALL: Final = "B-spline LPV (all levels)"
+SELECTED: Final = "selected"  # the one of PNLSS_ALL and LPV_ALL the held-out periods chose
 BEDDOES_LEISHMAN: Final = "Beddoes-Leishman (all levels)"
-MODELS: Final = (BLA_SS_OWN, BLA_SS_LEVEL1, PNLSS_ALL, PNLSS_LEVEL1, BEDDOES_LEISHMAN)
+MODELS: Final = (
+    BLA_SS_OWN, BLA_SS_LEVEL1, PNLSS_ALL, PNLSS_LEVEL1, LPV_ALL, SELECTED, BEDDOES_LEISHMAN,
+)  # fmt: skip
 # One colour per model (RGB), the same in the report's figures and in the view.
 MODEL_COLORS: Final = {
     BLA_SS_OWN: (31, 119, 180),  # blue
     BLA_SS_LEVEL1: (148, 103, 189),  # purple
     PNLSS_ALL: (255, 127, 14),  # orange
     PNLSS_LEVEL1: (140, 86, 75),  # brown
+    LPV_ALL: (214, 39, 40),  # red
+    SELECTED: (0, 0, 0),  # black: drawn over the model it repeats
     BEDDOES_LEISHMAN: (44, 160, 44),  # green
 }
 

@@ -36,6 +36,7 @@ dropped), like the measured data.
 
 import dataclasses
 import hashlib
+import math
 import time
 from collections.abc import Sequence
 from concurrent.futures import Future, wait
@@ -45,6 +46,13 @@ import numpy as np
 
 from .beddoes_leishman import fit_beddoes_leishman
 from .bootstrap import estimation_bootstrap
+from .bspline_lpv import (
+    LPV_MAX_PARAMETERS,
+    LpvSettings,
+    fit_bspline_lpv,
+    lpv_parameters,
+    scan_bspline_lpv,
+)
 from .clustering_ablation import (
     ablation_config,
     clustering_dropped,
@@ -56,15 +64,30 @@ from .config import IdentificationConfig
 from .dataset import Dataset
 from .level_models import level_models
 from .pnlss import one_blas_thread
-from .pnlss_training import fit_levels, level_signature, pnlss_sets, scan_levels
-from .results import IdentificationResult, LevelResult, Log
+from .pnlss_training import (
+    MAX_JACOBIAN_BYTES,
+    fit_levels,
+    jacobian_bytes,
+    level_signature,
+    pnlss_sets,
+    scan_levels,
+)
+from .results import (
+    SELECTED_LPV,
+    SELECTED_PNLSS,
+    IdentificationResult,
+    LevelResult,
+    Log,
+    pnlss_structure,
+)
+from .scan import periodic_error
 from .validation import validate
 
 # What a refit that only validates takes over from the previous result (identify's models_from).
 REUSED = (
     "levels", "linear_level1", "pnlss_all", "scan", "no_clustering", "pnlss_level1",
     "level1_signature", "pnlss_start_level", "pnlss_held_out", "final_models",
-    "beddoes_leishman", "semi_empirical_signature",
+    "beddoes_leishman", "semi_empirical_signature", "lpv_all", "lpv_scan", "selection",
 )  # fmt: skip
 
 
@@ -156,7 +179,11 @@ def _identify(
         if models_from is None:
             # 3. PNLSS on every estimation level, its iterate chosen on their held-out periods.
             _fit_pnlss_models(dataset, result, config, final_models, previous, client, say)
-            # 3b. The semi-empirical baseline, from the quasi-static sweep and the same sets.
+            # 3b. The second model class on the same sets, and the selected model.
+            if config.lpv:
+                _fit_lpv_models(result, config, final_models, say)
+            result.selection = select_model(result)
+            # 3c. The semi-empirical baseline, from the quasi-static sweep and the same sets.
             if config.semi_empirical:
                 _fit_semi_empirical(dataset, result, config, previous, say)
         # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
@@ -253,6 +280,93 @@ def _fit_pnlss_models(
                 result.pnlss_level1 = fit_levels([low], result, config, "level 1", say)
             result.level1_signature = signature
     result.timings_s["pnlss"] = time.perf_counter() - t0
+
+
+def _fit_lpv_models(
+    result: IdentificationResult, config: IdentificationConfig, final_models: bool, say: Log
+) -> None:
+    """The B-spline LPV model (bspline_lpv.py) on the PNLSS's training and held-out sets, from
+    the same linear model; scanned over its grid for the final models (``config.scan``)."""
+    ready = [
+        r
+        for r in result.levels.values()
+        if r.role == "estimation" and r.record.data is not None and r.linear is not None
+    ]
+    lin = result.linear_level1
+    if not ready or lin is None:
+        return
+    t0 = time.perf_counter()
+    train, held, _ = pnlss_sets(ready, config)
+    degrees = (config.lpv_scan_state_degrees if final_models and config.scan
+               else (config.lpv_state_degree,))  # fmt: skip
+    intervals = (config.lpv_scan_intervals if final_models and config.scan
+                 else (config.lpv_intervals,))  # fmt: skip
+    n_par = lpv_parameters(lin.nx, max(intervals), max(degrees))
+    samples = train.N * train.P * train.M
+    if n_par > LPV_MAX_PARAMETERS or jacobian_bytes(train, n_par) > MAX_JACOBIAN_BYTES:
+        result.warnings.append(
+            f"B-spline LPV (all levels) not fitted: at nx {lin.nx} (the linear model's order), "
+            f"{max(intervals)} knot intervals and state degree {max(degrees)} it has {n_par} "
+            f"parameters on {samples} samples (limits: {LPV_MAX_PARAMETERS} parameters, a "
+            f"{MAX_JACOBIAN_BYTES / 1e9:g} GB Jacobian); set nx lower, or fewer intervals or "
+            "degrees"
+        )
+        return
+    settings = LpvSettings(
+        intervals=config.lpv_intervals, state_degree=config.lpv_state_degree,
+        max_iter=config.lpv_max_iter, weighting=config.lpv_weighting,
+        stress=config.scan_stress,
+    )  # fmt: skip
+    try:
+        if final_models and config.scan and held is not None:
+            result.lpv_scan = scan_bspline_lpv(
+                train, held, lin, config.lpv_scan_intervals, config.lpv_scan_state_degrees,
+                settings,
+            )  # fmt: skip
+            result.lpv_all = result.lpv_scan.best
+        else:
+            result.lpv_all = fit_bspline_lpv(train, lin, settings, held)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        result.warnings.append(f"B-spline LPV (all levels) failed: {exc}")
+        return
+    result.timings_s["lpv"] = time.perf_counter() - t0
+    say(f"B-spline LPV (all levels): {result.lpv_all.describe()}, "
+        f"{result.timings_s['lpv']:.1f} s")  # fmt: skip
+
+
+def select_model(result: IdentificationResult) -> dict[str, Any]:
+    """The selected model: of the all-levels PNLSS and the B-spline LPV model, the one of
+    lower error on the held-out periods (scan.periodic_error, the scans' score; the sines are
+    not seen), with every candidate's error. Empty when neither is fitted or nothing is held
+    out."""
+    estimation = [
+        r for r in result.levels.values() if r.role == "estimation" and r.record.data is not None
+    ]
+    models: dict[str, Any] = {}
+    structures: dict[str, str] = {}
+    if result.pnlss_all is not None:
+        models[SELECTED_PNLSS] = result.pnlss_all
+        structures[SELECTED_PNLSS] = pnlss_structure(result.pnlss_all)
+    if result.lpv_all is not None:
+        models[SELECTED_LPV] = result.lpv_all
+        structures[SELECTED_LPV] = result.lpv_all.describe()
+    if not models or not estimation:
+        return {}
+    _, held, how = pnlss_sets(estimation, result.config)
+    if held is None:
+        return {}
+    scores = {name: periodic_error(m, held) for name, m in models.items()}
+    finite = {n: s for n, s in scores.items() if math.isfinite(s[0])}
+    if not finite:
+        return {}
+    chosen = min(finite, key=lambda n: finite[n][0])
+    return {
+        "class": chosen,
+        "structure": structures[chosen],
+        "held_out": how,
+        "validation_errors": {n: s[0] for n, s in scores.items()},
+        "validation_se": {n: s[1] for n, s in scores.items()},
+    }
 
 
 def _fit_semi_empirical(

@@ -12,6 +12,7 @@ import numpy as np
 from . import model_message as msg
 from .beddoes_leishman import BeddoesLeishman
 from .bla import BLA
+from .bspline_lpv import BSplineLPV, LpvScan
 from .clustering import ClusterResult
 from .config import IdentificationConfig
 from .dataset import LevelRecord, QuasiStaticSweep
@@ -19,6 +20,8 @@ from .models import LinearStateSpace, PNLSSModel
 from .quality import data_quality_note
 from .scan import ScanResult
 from .tables import (
+    LPV_ROW,
+    SELECTED_ROW,
     SEMI_EMPIRICAL_ROW,
     TABLE1_MODELS,
     floor_ratio_table,
@@ -174,6 +177,11 @@ class IdentificationResult:
     clustering_effect: dict[str, Any] = field(default_factory=dict)
     # Table 1's estimation spread (config.bootstrap > 0, final identification only).
     bootstrap: EstimationSpread | None = None
+    # The second nonlinear class (bspline_lpv.py; config.lpv), its scan (final models), and the
+    # selected model (pipeline.select_model: the class, its structure, the held-out errors).
+    lpv_all: BSplineLPV | None = None
+    lpv_scan: LpvScan | None = None
+    selection: dict[str, Any] = field(default_factory=dict)
     # The semi-empirical baseline (beddoes_leishman.py; config.semi_empirical, with a sweep).
     beddoes_leishman: BeddoesLeishman | None = None
     semi_empirical_signature: bytes = b""  # which sweep and sets it was fitted on
@@ -221,6 +229,9 @@ class IdentificationResult:
                 ):
                     md, csv_text = tables[key]
                     tables[key] = (boot.note(errors, level1) + md, csv_text)
+            if self.selection and any(k[0] == SELECTED_ROW for k in self.errors_all):
+                md, csv_text = tables["table1_all_levels"]
+                tables["table1_all_levels"] = (selection_note(self.selection) + md, csv_text)
             if self.noise_floor:
                 tables["table1_floor_ratios"] = floor_ratio_table(
                     [("all-levels table", self.errors_all), ("level-1 table", self.errors_level1)],
@@ -275,6 +286,7 @@ class IdentificationResult:
                 "pnlss_all_levels": self.pnlss_all.to_dict() if self.pnlss_all else None,
                 "pnlss_level1": self.pnlss_level1.to_dict() if self.pnlss_level1 else None,
                 "bla_ss_level1": self.linear_level1.to_dict() if self.linear_level1 else None,
+                "lpv_all_levels": self.lpv_all.to_dict() if self.lpv_all else None,
                 "beddoes_leishman": None
                 if self.beddoes_leishman is None
                 else self.beddoes_leishman.to_dict(),
@@ -321,6 +333,14 @@ class IdentificationResult:
             msg.DATA_QUALITY: self.data_quality,
             msg.EXPERIMENT: self.experiment,
             "timings_s": self.timings_s,
+            "selection": self.selection or None,
+            "lpv_scan": None
+            if self.lpv_scan is None
+            else {
+                "table": self.lpv_scan.rows,
+                "rule": self.lpv_scan.rule,
+                "seconds": self.lpv_scan.seconds,
+            },
             "pnlss_scan": None
             if self.scan is None
             else {
@@ -332,10 +352,37 @@ class IdentificationResult:
         }
 
 
+SELECTED_PNLSS = "PNLSS"  # pipeline.select_model's class names
+SELECTED_LPV = "B-spline LPV"
+
+
 def table1_models(errors: Mapping[tuple[str, str, float], float]) -> tuple[str, ...]:
-    """Table 1's rows: TABLE1_MODELS, and the semi-empirical baseline when it was scored."""
-    baseline = any(model == SEMI_EMPIRICAL_ROW for model, _, _ in errors)
-    return (*TABLE1_MODELS, SEMI_EMPIRICAL_ROW) if baseline else TABLE1_MODELS
+    """Table 1's rows: TABLE1_MODELS, then those of the second class, the selected model and
+    the semi-empirical baseline where they were scored."""
+    scored = {model for model, _, _ in errors}
+    extra = (LPV_ROW, SELECTED_ROW, SEMI_EMPIRICAL_ROW)
+    return (*TABLE1_MODELS, *(row for row in extra if row in scored))
+
+
+def pnlss_structure(model: PNLSSModel) -> str:
+    """A PNLSS model's structure in one line."""
+    return (
+        f"nx {model.nx}, degrees {list(model.degrees)}, {model.structure}, "
+        f"{model.parameters.size} parameters"
+    )
+
+
+def selection_note(selection: Mapping[str, Any]) -> str:
+    """The line above the all-levels Table 1 naming the selected model and why."""
+    if not selection:
+        return ""
+    errors = ", ".join(
+        f"{name} {value:.4g}" for name, value in selection["validation_errors"].items()
+    )
+    return (
+        f"selected: {selection['class']} ({selection['structure']}), the lower error on the "
+        f"held-out periods ({selection['held_out']}): {errors}.\n\n"
+    )
 
 
 QUASI_STATIC_BIN_DEG = 0.25  # models.json's quasi-static curves: mean C_l per α bin

@@ -61,7 +61,16 @@ from .models import LinearStateSpace, PNLSSModel
 from .monomials import STRUCTURES, check_degrees
 from .pnlss import EQUATIONS, PnlssSettings, fit_pnlss, output_equation_start, stress_periods
 
-__all__ = ["Candidate", "ScanResult", "ScanRow", "candidate_grid", "fit_candidate", "scan_pnlss"]
+__all__ = [
+    "Candidate",
+    "ScanResult",
+    "ScanRow",
+    "candidate_grid",
+    "fit_candidate",
+    "one_standard_error",
+    "periodic_error",
+    "scan_pnlss",
+]
 
 LinearSource = Callable[[int], LinearStateSpace] | Mapping[int, LinearStateSpace] | None
 
@@ -305,10 +314,9 @@ def select_one_se(rows: Sequence[ScanRow]) -> tuple[int, str]:
     if not ok:
         reasons = "; ".join(f"nx={r.nx} {r.degrees} {r.equations}: {r.status}" for r in rows)
         raise ValueError(f"no PNLSS candidate could be fitted: {reasons}")
-    i_min = min(ok, key=lambda i: rows[i].validation_error)
-    bound = rows[i_min].validation_error + rows[i_min].validation_se
-    within = [i for i in ok if rows[i].validation_error <= bound]
-    best = min(within, key=lambda i: (rows[i].n_params, rows[i].validation_error))
+    best, i_min, bound, within = one_standard_error(
+        {i: (rows[i].validation_error, rows[i].validation_se, rows[i].n_params) for i in ok}
+    )
     why = (
         f"one-standard-error rule: the lowest validation error is "
         f"{rows[i_min].validation_error:.4g} ± {rows[i_min].validation_se:.4g} "
@@ -318,6 +326,20 @@ def select_one_se(rows: Sequence[ScanRow]) -> tuple[int, str]:
         f"({rows[best].n_params} parameters)."
     )
     return best, why
+
+
+def one_standard_error(
+    scores: Mapping[int, tuple[float, float, int]],
+) -> tuple[int, int, float, list[int]]:
+    """The one-standard-error rule on {candidate: (validation error, its SE, parameters)} of
+    fitted candidates: (the kept candidate, the lowest-error one, the bound error + SE, the
+    candidates within it). The kept one has the fewest parameters within the bound (ties: the
+    lower error). Every model class's scan selects with it."""
+    i_min = min(scores, key=lambda i: scores[i][0])
+    bound = scores[i_min][0] + scores[i_min][1]
+    within = [i for i in scores if scores[i][0] <= bound]
+    best = min(within, key=lambda i: (scores[i][2], scores[i][0]))
+    return best, i_min, bound, within
 
 
 def cross_fit(rows: Sequence[ScanRow]) -> ScanRow:
@@ -564,9 +586,10 @@ def periodic_at(model: PNLSSModel, data: PeriodicData, scale: float) -> bool:
 
 
 def periodic_error(
-    model: PNLSSModel, data: PeriodicData, weights: np.ndarray | None = None
+    model: Any, data: PeriodicData, weights: np.ndarray | None = None
 ) -> tuple[float, float]:
-    """Relative RMS error over steady-state periods and its standard error (module docs)."""
+    """Relative RMS error over steady-state periods and its standard error (module docs), of
+    any model with ``simulate(u)`` (every class's scan scores with it)."""
     N, P, M = data.u.shape
     e2 = np.empty((M, P))
     for m in range(M):

@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 
 TABLE1_MODELS = ("BLA FRF", "BLA SS", "PNLSS")
+LPV_ROW = "B-spline LPV"  # the all-levels table's second nonlinear class (bspline_lpv.py)
+SELECTED_ROW = "selected"  # the all-levels table's row of the model the held-out periods chose
 SEMI_EMPIRICAL_ROW = "Beddoes-Leishman"  # the all-levels table's baseline row, when fitted
 FLOOR_ROW = "noise floor"  # Table 1's last row (metrics.noise_floor)
 

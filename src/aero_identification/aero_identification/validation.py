@@ -17,8 +17,10 @@ from .metrics import (
     relative_rms_error_spread,
     steady_state_response,
 )
-from .results import IdentificationResult, LevelResult
-from .tables import SEMI_EMPIRICAL_ROW
+from .results import SELECTED_LPV, SELECTED_PNLSS, IdentificationResult, LevelResult
+from .tables import LPV_ROW, SELECTED_ROW, SEMI_EMPIRICAL_ROW
+
+PNLSS_ROW = "PNLSS"  # Table 1's row of the PNLSS models
 
 __all__ = ["held_out_errors", "nearest_level", "record_error", "validate", "validate_sine"]
 
@@ -92,6 +94,20 @@ def validate_sine(rec: SineData, result: IdentificationResult) -> None:
         y_hat = steady_state_response(model, rec.u, rec.samples_per_period)
         score(errors, spreads, "PNLSS", y_hat, may_diverge=True)
         preds[key] = y_hat
+    if result.lpv_all is not None:
+        y_hat = steady_state_response(result.lpv_all, rec.u, rec.samples_per_period)
+        score(result.errors_all, result.spreads_all, LPV_ROW, y_hat, may_diverge=True)
+        preds[msg.LPV_ALL] = y_hat
+    chosen = {SELECTED_PNLSS: msg.PNLSS_ALL, SELECTED_LPV: msg.LPV_ALL}.get(
+        result.selection.get("class", "")
+    )
+    if chosen is not None and chosen in preds:
+        source = PNLSS_ROW if chosen == msg.PNLSS_ALL else LPV_ROW
+        cell = (source, name, f)
+        if cell in result.errors_all:
+            result.errors_all[(SELECTED_ROW, name, f)] = result.errors_all[cell]
+            result.spreads_all[(SELECTED_ROW, name, f)] = result.spreads_all[cell]
+            preds[msg.SELECTED] = preds[chosen]
     if result.beddoes_leishman is not None:
         y_hat = steady_state_response(result.beddoes_leishman, rec.u, rec.samples_per_period)
         score(result.errors_all, result.spreads_all, SEMI_EMPIRICAL_ROW, y_hat, may_diverge=True)
