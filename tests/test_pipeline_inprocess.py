@@ -550,3 +550,36 @@ def test_the_semi_empirical_baseline_is_calibrated_on_the_plans_sweep(campaign, 
     assert "| Beddoes-Leishman |" not in plain.tables()["table1_all_levels"][0]
     assert sum("Beddoes-Leishman baseline not fitted: the source has no quasi-static sweep" in w
                for w in plain.warnings) == 1  # fmt: skip
+
+
+def test_the_second_class_and_the_selected_model(campaign, tmp_path) -> None:
+    from aero_identification import model_message as mm
+    from aero_identification.report import write_report
+
+    result = identify(_assemble(campaign), ACCOUNT_CONFIG, final=True)
+    assert result.lpv_all is not None and result.pnlss_all is not None
+    sel = result.selection
+    # The selected class is the one of lower error on the held-out periods (never the sines).
+    assert sel["class"] == min(sel["validation_errors"], key=sel["validation_errors"].get)
+    assert set(sel["validation_errors"]) == {"PNLSS", "B-spline LPV"}
+    source = "PNLSS" if sel["class"] == "PNLSS" else "B-spline LPV"
+    for (model, level, f), error in result.errors_all.items():
+        if model == "selected":
+            assert error == result.errors_all[(source, level, f)]
+    assert sum(k[0] == "selected" for k in result.errors_all) == 4  # 2 levels × 2 sines
+    assert not any(k[0] in ("selected", "B-spline LPV") for k in result.errors_level1)
+    # On the held-out periods the second class is never worse than its linear start.
+    h = result.lpv_all.history_
+    assert h["kept_error"] <= h["linear_start_error"]
+    md = result.tables()["table1_all_levels"][0]
+    assert md.startswith(f"selected: {sel['class']} (")
+    assert "| B-spline LPV |" in md and "| selected |" in md
+    for prediction in result.predictions:
+        series = dict(mm.prediction_series(prediction))
+        assert series[mm.SELECTED] == series[mm.LPV_ALL if source != "PNLSS" else mm.PNLSS_ALL]
+    write_report(result, tmp_path)
+    models = json.loads((tmp_path / "models.json").read_text())
+    assert models["selection"]["class"] == sel["class"]
+    assert models["models"]["lpv_all_levels"]["parameters"] == result.lpv_all.n_params
+    summary = (tmp_path / "summary.md").read_text()
+    assert "## Selected model" in summary and "## B-spline LPV (all levels)" in summary

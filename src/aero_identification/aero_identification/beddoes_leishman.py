@@ -17,9 +17,9 @@ identification knows neither chord nor speed):
     x3      pressure lag T_p of C_l^p = C_lα (α_E − α0) + π T_u α̇;
             α_F = x3 / C_lα + α0                                           [HGM eq. 13–14]
     x4      separation point, lag T_f towards f^st(α_F)                   [HGM eq. 15]
-Lift [HGM eq. 16]:
+Lift [HGM §2]:
     C_l = C_lα (α_E − α0) x4 + C_l^fs(α_E) (1 − x4) + π T_u α̇.
-Static curves [HGM eq. 3–5], from the static lift C_l^st(α) = C_lα (α − α0) K(f^st),
+Static curves [HGM §2], from the static lift C_l^st(α) = C_lα (α − α0) K(f^st),
 K(f) = ((1 + √f)/2)² [LB]:
     f^st = (2 √(C_l^st / (C_lα (α − α0))) − 1)², clipped to [0, 1];
     C_l^fs = (C_l^st − C_lα (α − α0) f^st) / (1 − f^st)   (C_l^st / 2 where f^st → 1).
@@ -97,7 +97,7 @@ def static_lift(sweep: QuasiStaticSweep, bin_deg: float = STATIC_BIN_DEG) -> Sta
 
     The curve is the mean C_l of both branches per α bin (`QuasiStaticSweep.static_curve`).
     The attached line C_lα (α − α0) is the least-squares line over the lower half of the angles
-    from the sweep's lowest to the angle of maximum lift; f^st and C_l^fs follow [HGM eq. 3–5].
+    from the sweep's lowest to the angle of maximum lift; f^st and C_l^fs follow [HGM §2].
 
     Raises:
         ValueError: a sweep too short for the line (fewer than 4 bins below the maximum lift)

@@ -7,7 +7,7 @@ w_j the cubic B-splines on uniform knots over the training input's range [deBoor
 clamped to it, so the coefficients are constant beyond), φ_m the monomials of the state of
 total degree 0 … ``state_degree`` (degree 0 and 1 give b(α) + A(α) x: a linear-parameter-varying
 model scheduled on its own input [Toth2010], a local-linear model network with B-spline
-validity functions [Nelles2001] ch. 20–22; higher degrees let one angle hold two flow states,
+validity functions [Nelles2001]; higher degrees let one angle hold two flow states,
 the stall's hysteresis). The B-splines are a partition of unity and local: each w_j is
 non-zero over four knot intervals only, so a low-offset record is described by the splines it
 visits, and a model that is linear there stays linear (the global polynomial of the PNLSS

@@ -91,7 +91,7 @@ MODEL_COLORS: Final = {
     PNLSS_ALL: (255, 127, 14),  # orange
     PNLSS_LEVEL1: (140, 86, 75),  # brown
     LPV_ALL: (214, 39, 40),  # red
-    SELECTED: (0, 0, 0),  # black: drawn over the model it repeats
+    SELECTED: (23, 190, 207),  # cyan: drawn over the model it repeats
     BEDDOES_LEISHMAN: (44, 160, 44),  # green
 }
 

@@ -449,6 +449,36 @@ def summary_markdown(result: IdentificationResult) -> str:
         )
     else:
         lines.append("not fitted")
+    lines += ["", "## B-spline LPV (all levels)", ""]
+    lpv = result.lpv_all
+    if lpv is not None:
+        h = lpv.history_
+        lines.append(
+            f"{lpv.describe()}; started from the linear model of level "
+            f"{result.pnlss_start_level}; kept: {h.get('kept')} (error on the held-out periods "
+            f"{h.get('kept_error', float('nan')):.4g}, its linear start "
+            f"{h.get('linear_start_error', float('nan')):.4g})"
+            + (f"; structure chosen by the scan ({result.lpv_scan.rule})" if result.lpv_scan
+               else "")
+            + "."
+        )  # fmt: skip
+    else:
+        lines.append("not fitted")
+    if result.selection:
+        sel = result.selection
+        errors = ", ".join(f"{n} {v:.4g}" for n, v in sel["validation_errors"].items())
+        lines += ["", "## Selected model", "",
+                  f"{sel['class']} ({sel['structure']}): the lower error on the held-out periods "
+                  f"({sel['held_out']}): {errors}."]  # fmt: skip
+    if result.beddoes_leishman is not None:
+        how = (
+            "; static curves from the quasi-static sweep (Kirchhoff inversion), time constants "
+            "fitted on the estimation sets."
+        )
+        lines += ["", "## Beddoes-Leishman baseline (all levels)", "",
+                  result.beddoes_leishman.describe() + how]  # fmt: skip
+    if result.lpv_scan is not None:
+        lines += ["", "## B-spline LPV structure scan", "", result.lpv_scan.to_markdown().rstrip()]
     for key, (markdown, _) in result.tables().items():
         title = {
             "table1_all_levels": "Table 1, trained on all levels (relative RMS error on sines)",
