@@ -82,7 +82,9 @@ def test_identification_of_the_short_campaign(campaign) -> None:
         assert e_all[("PNLSS", "high", f)] < e_all[("BLA SS", "high", f)]
         assert e_all[("PNLSS", "high", f)] * 2 < e_1[("BLA SS", "high", f)]
     markdown, csv = result.tables()["table1_all_levels"]
-    assert markdown.splitlines()[0] == "| model | low 1 Hz | low 1.6 Hz | high 1 Hz | high 1.6 Hz |"
+    # The line naming the selected model, then the table.
+    assert markdown.startswith(f"selected: {result.selection['class']} (")
+    assert markdown.splitlines()[2] == "| model | low 1 Hz | low 1.6 Hz | high 1 Hz | high 1.6 Hz |"
     assert csv.count("\n") >= 3
     assert json.dumps(result.to_json_dict(), allow_nan=True)
 
@@ -134,7 +136,8 @@ def test_anomalies_exclude_what_they_touch_and_the_table_says_so(campaign) -> No
     asm = _assemble(campaign)
     clean = identify(asm, ACCOUNT_CONFIG, final=True)
     assert clean.data_quality["clean"]
-    assert clean.tables()["table1_all_levels"][0].startswith("| model")
+    # No data-quality note: the selection's line, then the table.
+    assert clean.tables()["table1_all_levels"][0].split("\n\n")[1].startswith("| model")
     stamp = lambda k: T0 + round(k * 1e9 / plan.fs)  # noqa: E731
     # A free run over the last sample of period 2 and the first of period 3 of one block ...
     k = seg.start_k + seg.length - 1
@@ -432,7 +435,9 @@ def test_final_identification_with_the_estimation_bootstrap(campaign, tmp_path) 
     assert plain.bootstrap is None and plain.errors_all == result.errors_all
     write_report(result, tmp_path)
     md = (tmp_path / "table1_all_levels.md").read_text()
-    assert "std over 3 bootstrap refits" in md and md.count("±") == 2 + 2 * 3 * 4  # note, cells
+    # The note's two ±, then two per cell of the five rows with spreads (BLA FRF, BLA SS, PNLSS,
+    # B-spline LPV, selected; the noise floor has none), four cells each.
+    assert "std over 3 bootstrap refits" in md and md.count("±") == 2 + 2 * 5 * 4
     header = (tmp_path / "table1_all_levels.csv").read_text().splitlines()[0]
     assert header.count("estimation std") == 4 and header.count("estimation mean") == 4
     errors = json.loads((tmp_path / "models.json").read_text())["errors"]

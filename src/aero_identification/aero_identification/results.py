@@ -199,7 +199,8 @@ class IdentificationResult:
 
     @property
     def sine_freqs(self) -> list[float]:
-        return sorted({round(k[2], 6) for k in (*self.errors_all, *self.errors_level1)})
+        cells = {round(k[2], 6) for k in (*self.errors_all, *self.errors_level1)}
+        return sorted(cells | {round(f, 6) for _, f in self.noise_floor})
 
     def tables(self) -> dict[str, tuple[str, str]]:
         """Table 1 (both variants, and without clustering) when there were sines; the

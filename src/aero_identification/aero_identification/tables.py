@@ -219,6 +219,7 @@ HELD_OUT_COLUMNS = (
     ("linear_nearest", "linear SS (nearest level)"),
     ("linear_lowest", "linear SS (lowest level)"),
     ("pnlss", "PNLSS"),
+    ("lpv", "B-spline LPV"),
 )
 
 
@@ -233,7 +234,7 @@ def held_out_table(rows: Sequence[Mapping[str, Any]], digits: int = 3) -> tuple[
     for row in rows:
         cells = []
         for key, _ in HELD_OUT_COLUMNS:
-            v = row[key]
+            v = row.get(key)
             if v is None:
                 cells.append("–")
             elif isinstance(v, float):
@@ -241,5 +242,5 @@ def held_out_table(rows: Sequence[Mapping[str, Any]], digits: int = 3) -> tuple[
             else:
                 cells.append(str(v))
         md.append("| " + " | ".join(cells) + " |")
-        writer.writerow(["" if row[k] is None else row[k] for k, _ in HELD_OUT_COLUMNS])
+        writer.writerow(["" if row.get(k) is None else row[k] for k, _ in HELD_OUT_COLUMNS])
     return "\n".join(md) + "\n", buffer.getvalue()

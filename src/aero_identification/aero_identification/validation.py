@@ -144,8 +144,8 @@ def record_error(model: Any, data: PeriodicData, centred: bool) -> float:
 
 
 def held_out_errors(result: IdentificationResult) -> list[dict[str, Any]]:
-    """Errors of the linear models (nearest and lowest estimation level) and of the all-levels
-    PNLSS on every held-out level's periods."""
+    """Errors of the linear models (nearest and lowest estimation level), of the all-levels
+    PNLSS and of the B-spline LPV model on every held-out level's periods."""
     estimation = [
         lv for lv in result.levels.values() if lv.role == "estimation" and lv.linear is not None
     ]
@@ -165,6 +165,9 @@ def held_out_errors(result: IdentificationResult) -> list[dict[str, Any]]:
                 "pnlss": None
                 if result.pnlss_all is None
                 else record_error(result.pnlss_all, data, centred=False),
+                "lpv": None
+                if result.lpv_all is None
+                else record_error(result.lpv_all, data, centred=False),
             }
         )
     return rows

@@ -361,3 +361,15 @@ def test_noise_floor_row_and_ratios_in_tables_json_and_summary() -> None:
     assert result.noise_floor == {}
     assert "| noise floor | – |" in result.tables()["table1_all_levels"][0]
     assert "table1_floor_ratios" not in result.tables()
+
+
+def test_a_floor_without_any_model_cell_still_makes_its_table() -> None:
+    """A sine measured while no model could be fitted (e.g. an anomaly excluded the level's
+    periods): the floor alone fills Table 1's columns."""
+    result = IdentificationResult(config=IdentificationConfig(), fs=50.0, sines_planned=True)
+    result.levels["single"] = LevelResult(LevelRecord("single", None, key="0", offset_deg=6.6))
+    result.noise_floor[("single", 1.0)] = 0.07
+    assert result.sine_freqs == [1.0]
+    md = result.tables()["table1_all_levels"][0]
+    assert md.splitlines()[0] == "| model | single 1 Hz |"
+    assert md.strip().splitlines()[-1] == "| noise floor | 0.07 |"
