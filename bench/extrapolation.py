@@ -8,7 +8,7 @@ Issue 22's F-16 check, on real measured data (docs/real_data.md; kept out of the
 
 - estimation levels 1, 3 and 5 (12, 37 and 74 N RMS); the scan trains on the mean of each
   level's periods but the last and selects on the last period of each (the pipeline's split
-  for one realization per level, pnlss_training.pnlss_sets);
+  for one realization per level, estimation_sets.estimation_sets);
 - candidates: nx = the level-1 linear order (subspace order scan), statesonly monomials of
   degree 3 or 2–3, in the state equation or in both, each from the linear and the
   output-equation start (the campaign's scan grid on these data), 20 LM iterations;

@@ -25,8 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from aero_identification.campaign_dataset import campaign_dataset
+from aero_identification.estimation_sets import estimation_sets
 from aero_identification.pipeline import identify
-from aero_identification.pnlss_training import pnlss_sets
 from aero_identification.scan import periodic_error
 from aero_rig.offline import read_campaign_bag, recorded_config
 
@@ -46,7 +46,7 @@ def judge(bag: Path, weightings: list[str]) -> dict[str, Any]:
         if model is None:
             out[weighting] = {"error": "; ".join(result.warnings)}
             continue
-        _, held, _ = pnlss_sets(list(result.levels.values()), config)
+        _, held, _ = estimation_sets(list(result.levels.values()), config)
         assert held is not None
         per_level = []
         for k in range(held.M):  # one held-out realization per level, the levels along M

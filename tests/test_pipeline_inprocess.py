@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from aero_identification import pipeline, pnlss_training
+from aero_identification import estimation_sets, pipeline, pnlss_training
 from aero_identification.campaign_dataset import campaign_dataset
 from aero_identification.config import IdentificationConfig
 from aero_identification.period_assembly import CampaignAssembler
@@ -330,11 +330,11 @@ def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:
     assert {r.start for r in result.scan.rows} == {"linear", "output_ls"}
     assert result.pnlss_all is result.scan.best
     # The cross-fit (scan_splits 2): each candidate fitted again with the other realization of
-    # every level held out (pnlss_sets fold 1: training and held-out sets swapped); the kept
+    # every level held out (estimation_sets fold 1: training and held-out sets swapped); the kept
     # models are those of the one-split scan.
     estimation = [lv for lv in result.levels.values() if lv.role == "estimation"]
-    train, held, _ = pnlss_training.pnlss_sets(estimation, config)
-    train_1, held_1, how_1 = pnlss_training.pnlss_sets(estimation, config, fold=1)
+    train, held, _ = estimation_sets.estimation_sets(estimation, config)
+    train_1, held_1, how_1 = estimation_sets.estimation_sets(estimation, config, fold=1)
     assert held is not None and held_1 is not None and how_1 == "realization 0 of each level"
     np.testing.assert_array_equal(train_1.y, held.y)
     np.testing.assert_array_equal(held_1.y, train.y)

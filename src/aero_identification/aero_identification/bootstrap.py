@@ -38,9 +38,10 @@ from .bspline_lpv import BSplineLPV, LpvSettings, fit_bspline_lpv
 from .config import IdentificationConfig
 from .data import PeriodicData
 from .dataset import Dataset, QuasiStaticSweep
+from .estimation_sets import EstimationSets, ready_levels
 from .level_models import level_models
 from .models import LinearStateSpace, PNLSSModel
-from .pnlss_training import fit_client, level_weights, pnlss_sets, scan_levels
+from .pnlss_training import fit_client, level_weights, scan_levels
 from .results import EstimationSpread, IdentificationResult, LevelResult, Log
 from .scan import Candidate, run_fits
 from .subspace import fit_linear_ss
@@ -139,25 +140,25 @@ def refit_candidates(
 
 
 def refit_job(
-    levels: Sequence[LevelResult],
+    sets: EstimationSets,
     how: tuple[Candidate, int, float | None],
     config: IdentificationConfig,
 ) -> tuple[Candidate, LinearStateSpace, tuple[PeriodicData, PeriodicData], dict[str, Any]] | None:
-    """One PNLSS fit of a given structure on `pnlss_sets(levels)`, from the lowest level's
+    """One PNLSS fit of a given structure on the estimation sets, from the lowest level's
     linear model (at the candidate's order, as the scan starts it), as a job for
     `scan.run_fits`: the candidate, its start, its (training, held-out) sets and options; None
     when there are no held-out periods (the scan could not have scored it)."""
     cand, max_iter, stress = how
-    data, validation, _ = pnlss_sets(levels, config)
+    data, validation = sets.train, sets.held
     if validation is None:
         return None
-    low = levels[0]
+    low = sets.levels[0]
     assert low.linear is not None and low.bla is not None
     lin = low.linear
     if cand.nx != lin.nx:
         u0, y0 = float(lin.u_mean[0]), float(lin.y_mean[0])
         lin = fit_linear_ss(low.bla, nx=cand.nx).with_operating_point(u0, y0)
-    weights, val_weights = level_weights(levels, config, data, validation)
+    weights, val_weights = level_weights(sets.levels, config, data, validation)
     options = {
         "max_iter": max_iter,
         "record_weights": weights,
@@ -217,29 +218,35 @@ def estimation_bootstrap(
     # One structure for both tables: the level-1 PNLSS is the all-levels one, not refitted.
     same = level1 is not None and result.pnlss_level1 is result.pnlss_all and every == level1
     replicates: list[IdentificationResult] = []
+    replicate_sets: list[EstimationSets | None] = []  # each replicate's, built once
     wanted: list[Any] = []  # the refit jobs of every replicate
     slots: list[tuple[IdentificationResult, str]] = []  # where each job's model goes
     for _ in range(config.bootstrap):
         rep = _draw_replicate(result, config, rng)
         replicates.append(rep)
         estimation = [r for r in rep.levels.values() if r.role == "estimation"]
-        ready = [r for r in estimation if r.bla is not None and r.linear is not None]
+        ready = ready_levels(rep)
         if not ready or ready[0] is not estimation[0]:
+            replicate_sets.append(None)
             if rescan:
                 structures.append("")
             continue
+        sets = EstimationSets.of(ready, config)
+        replicate_sets.append(sets)
         if rescan:
-            scan = scan_levels(ready, rep, config, client, lambda _m: None)
+            scan = scan_levels(sets, rep, config, client, lambda _m: None)
             rep.pnlss_all = None if scan is None else scan.best
             structures.append("" if scan is None else scan.best_row.structure_label)
             result.warnings.extend(
                 f"bootstrap replicate {len(replicates)}: {w}" for w in rep.warnings
             )
-        for how, levels, slot in (
-            (None if rescan else every, ready, "pnlss_all"),
-            (None if same else level1, ready[:1], "pnlss_level1"),
-        ):
-            job = None if how is None else refit_job(levels, how, config)
+        jobs = []
+        if every is not None and not rescan:
+            jobs.append((refit_job(sets, every, config), "pnlss_all"))
+        if level1 is not None and not same:
+            level1_sets = EstimationSets.of(ready[:1], config)
+            jobs.append((refit_job(level1_sets, level1, config), "pnlss_level1"))
+        for job, slot in jobs:
             if job is not None:
                 wanted.append(job)
                 slots.append((rep, slot))
@@ -250,7 +257,7 @@ def estimation_bootstrap(
         return
     for (rep, slot), fitted in zip(slots, models, strict=True):
         setattr(rep, slot, fitted)
-    spread = _estimation_spread(dataset, result, replicates, same)
+    spread = _estimation_spread(dataset, result, replicates, replicate_sets, same)
     result.bootstrap = dataclasses.replace(
         spread,
         seconds=time.perf_counter() - t0,
@@ -303,18 +310,19 @@ def _estimation_spread(
     dataset: Dataset,
     result: IdentificationResult,
     replicates: Sequence[IdentificationResult],
+    replicate_sets: Sequence[EstimationSets | None],
     same: bool,
 ) -> EstimationSpread:
     """Table 1 scored on every replicate (with its refitted PNLSS) and each cell's spread."""
     replicates_all: list[dict[Cell, float]] = []
     replicates_level1: list[dict[Cell, float]] = []
-    for rep in replicates:
+    for rep, sets in zip(replicates, replicate_sets, strict=True):
         if same:
             rep.pnlss_level1 = rep.pnlss_all
-        if result.beddoes_leishman is not None and dataset.quasi_static is not None:
-            rep.beddoes_leishman = _refit_semi_empirical(dataset.quasi_static, rep)
-        if result.lpv_all is not None:
-            rep.lpv_all = _refit_lpv(result.lpv_all, rep)
+        if sets is not None and result.beddoes_leishman is not None and dataset.quasi_static:
+            rep.beddoes_leishman = _refit_semi_empirical(dataset.quasi_static, sets)
+        if sets is not None and result.lpv_all is not None:
+            rep.lpv_all = _refit_lpv(result.lpv_all, rep, sets)
         rep.selection = result.selection  # the estimate's class, as its structure is kept
         validate(dataset, rep)
         replicates_all.append(dict(rep.errors_all))
@@ -334,38 +342,31 @@ def _estimation_spread(
     )
 
 
-def _refit_semi_empirical(
-    sweep: QuasiStaticSweep, rep: IdentificationResult
-) -> BeddoesLeishman | None:
-    """The Beddoes–Leishman baseline refitted on a replicate's estimation periods (the sweep is
+def _refit_semi_empirical(sweep: QuasiStaticSweep, sets: EstimationSets) -> BeddoesLeishman | None:
+    """The Beddoes–Leishman baseline refitted on a replicate's estimation sets (the sweep is
     not resampled: it calibrates the static curves); None where the fit fails (its cells then
     count as failed)."""
-    levels = [
-        r for r in rep.levels.values() if r.role == "estimation" and r.record.data is not None
-    ]
     try:
-        train, held, _ = pnlss_sets(levels, rep.config)
-        return fit_beddoes_leishman(sweep, train, held)
+        return fit_beddoes_leishman(sweep, sets.train, sets.held)
     except ValueError:
         return None
 
 
-def _refit_lpv(kept: BSplineLPV, rep: IdentificationResult) -> BSplineLPV | None:
-    """The B-spline LPV model refitted on a replicate with the estimate's structure (knot
-    intervals, state degree); None where the fit fails (its cells then count as failed)."""
-    levels = [
-        r for r in rep.levels.values() if r.role == "estimation" and r.record.data is not None
-    ]
+def _refit_lpv(
+    kept: BSplineLPV, rep: IdentificationResult, sets: EstimationSets
+) -> BSplineLPV | None:
+    """The B-spline LPV model refitted on a replicate's estimation sets with the estimate's
+    structure (knot intervals, state degree); None where the fit fails (its cells then count
+    as failed)."""
     config = rep.config
     settings = LpvSettings(
         intervals=kept.intervals, state_degree=kept.state_degree, max_iter=config.lpv_max_iter,
         weighting=config.lpv_weighting, stress=config.scan_stress,
     )  # fmt: skip
-    if rep.linear_level1 is None or not levels:
+    if rep.linear_level1 is None:
         return None
     try:
-        train, held, _ = pnlss_sets(levels, config)
-        return fit_bspline_lpv(train, rep.linear_level1, settings, held)
+        return fit_bspline_lpv(sets.train, rep.linear_level1, settings, sets.held)
     except (ValueError, np.linalg.LinAlgError):
         return None
 

@@ -26,7 +26,6 @@ Estimation (`fit_bspline_lpv`), in the PNLSS's manner [Paduart2010]:
    kept: on those periods the model is never worse than the linear model it started from.
 """
 
-import itertools
 import math
 import time
 from collections.abc import Sequence
@@ -39,6 +38,7 @@ from scipy.interpolate import BSpline
 
 from .data import PeriodicData
 from .models import LinearStateSpace
+from .monomials import monomial_exponents
 
 __all__ = [
     "LPV_MAX_PARAMETERS",
@@ -58,16 +58,12 @@ STATE_BOUND = 1e3  # |x| (unit RMS on the training input) beyond this: diverged 
 
 
 def state_exponents(nx: int, degree: int) -> np.ndarray:
-    """(M, nx) exponents of the state monomials of total degree 0 … degree (degree 0 first,
-    then 1 in the order of the states, then higher)."""
-    rows = [
-        e
-        for total in range(degree + 1)
-        for e in itertools.product(range(total + 1), repeat=nx)
-        if sum(e) == total
-    ]
-    rows.sort(key=lambda e: (sum(e), [-v for v in e]))
-    return np.array(rows, dtype=np.int64).reshape(-1, nx)
+    """(M, nx) exponents of the state monomials of total degree 0 … degree: the constant, the
+    states in order, then `monomials.monomial_exponents` of degrees 2 … degree (the PNLSS's)."""
+    rows = [np.zeros((1, nx), dtype=np.int64), np.eye(nx, dtype=np.int64)]
+    if degree >= 2:
+        rows.append(monomial_exponents(nx, range(2, degree + 1)))
+    return np.concatenate(rows)
 
 
 def lpv_parameters(nx: int, intervals: int, state_degree: int = 1) -> int:

@@ -12,9 +12,9 @@ import numpy as np
 from .bla import bla_levels_db
 from .config import IdentificationConfig
 from .dataset import Dataset
+from .estimation_sets import estimation_sets, validation_realization
 from .level_models import kept_periods
 from .metrics import relative_rms_error, steady_state_response
-from .pnlss_training import pnlss_sets, validation_realization
 from .results import IdentificationResult, Log
 from .warm_up import warm_up
 
@@ -147,7 +147,7 @@ def clustering_effect(
         # The PNLSS fit's own held-out record of this level: its kept periods' mean.
         data = lv.record.data
         if lv.bla is not None and lv.role == "estimation" and data is not None:
-            _, held, _ = pnlss_sets([lv], cfg)
+            _, held, _ = estimation_sets([lv], cfg)
             if held is not None:
                 u, y = held.u[:, 0, 0], held.y[:, 0, 0]
                 for tag, model in (("with", clustered.pnlss_all), ("without", plain.pnlss_all)):

@@ -112,8 +112,8 @@ class IdentificationConfig:
         "fit the Beddoes-Leishman baseline (static curves from the quasi-static sweep, time "
         "constants on the estimation data)",
     )
-    # PNLSS training and held-out data (pnlss_training.pnlss_sets): the held-out realization chooses
-    # the iterate and scores the scan's candidates; every other realization trains.
+    # The estimation sets' held-out realization (estimation_sets.py): it chooses every model's
+    # iterate and scores the scans' candidates and the selection; every other one trains.
     validation_realization: int = hyper(
         1,
         "realization whose periods choose the PNLSS iterate (the last one if a level has "

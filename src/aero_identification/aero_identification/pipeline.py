@@ -12,7 +12,8 @@ Every stage runs that the data allow, each in its own module:
 3. pnlss_training.py: one PNLSS model over every estimation level ("all levels";
    [PitchingWing] §4.1), started from the lowest level's linear model, trained on one mean
    period per level and training realization and choosing its iterate on held-out periods of
-   the same levels (`pnlss_sets`); with ``config.scan`` (the final models: the final
+   the same levels (estimation_sets.py: built once, `EstimationSets`, and shared by every
+   model class); with ``config.scan`` (the final models: the final
    identification, or ``final_models``) the cross-validated structure scan chooses its
    structure; and, when the source plans sines, the paper's "level 1" PNLSS trained on the
    lowest level alone;
@@ -62,6 +63,7 @@ from .clustering_ablation import (
 )
 from .config import IdentificationConfig
 from .dataset import Dataset
+from .estimation_sets import EstimationSets, ready_levels
 from .level_models import level_models
 from .pnlss import one_blas_thread
 from .pnlss_training import (
@@ -69,7 +71,6 @@ from .pnlss_training import (
     fit_levels,
     jacobian_bytes,
     level_signature,
-    pnlss_sets,
     scan_levels,
 )
 from .results import (
@@ -177,15 +178,22 @@ def _identify(
         )
     try:
         if models_from is None:
-            # 3. PNLSS on every estimation level, its iterate chosen on their held-out periods.
-            _fit_pnlss_models(dataset, result, config, final_models, previous, client, say)
+            # 3. Every model class on the same estimation sets, built once here.
+            estimation = [r for r in result.levels.values() if r.role == "estimation"]
+            result.linear_level1 = estimation[0].linear if estimation else None
+            ready = ready_levels(result)
+            sets = EstimationSets.of(ready, config) if ready else None
+            # 3a. PNLSS on every estimation level, its iterate chosen on their held-out periods.
+            if sets is not None:
+                _fit_pnlss_models(dataset, result, sets, config, final_models, previous, client,
+                                  say)  # fmt: skip
             # 3b. The second model class on the same sets, and the selected model.
-            if config.lpv:
-                _fit_lpv_models(result, config, final_models, say)
-            result.selection = select_model(result)
+            if config.lpv and sets is not None:
+                _fit_lpv_models(result, sets, config, final_models, say)
+            result.selection = select_model(result, sets) if sets is not None else {}
             # 3c. The semi-empirical baseline, from the quasi-static sweep and the same sets.
             if config.semi_empirical:
-                _fit_semi_empirical(dataset, result, config, previous, say)
+                _fit_semi_empirical(dataset, result, sets, previous, say)
         # 4. Validation: single sines, held-out levels; Table 1's estimation spread.
         validate(dataset, result)
         if final and config.bootstrap > 0:
@@ -241,6 +249,7 @@ def _fit_level_models(
 def _fit_pnlss_models(
     dataset: Dataset,
     result: IdentificationResult,
+    sets: EstimationSets,
     config: IdentificationConfig,
     final_models: bool,
     previous: IdentificationResult | None,
@@ -248,23 +257,16 @@ def _fit_pnlss_models(
     say: Log,
 ) -> None:
     """The all-levels PNLSS (scanned for the final models) and the level-1 PNLSS."""
-    estimation = [r for r in result.levels.values() if r.role == "estimation"]
-    low = estimation[0] if estimation else None
-    result.linear_level1 = low.linear if low else None
+    low = next(r for r in result.levels.values() if r.role == "estimation")
     t0 = time.perf_counter()
-    ready = [
-        r
-        for r in estimation
-        if r.record.data is not None and r.bla is not None and r.linear is not None
-    ]
-    if config.pnlss and low is not None and result.linear_level1 is not None and ready:
+    if config.pnlss and result.linear_level1 is not None:
         result.pnlss_start_level = low.name
         if final_models and config.scan:
-            result.scan = scan_levels(ready, result, config, client, say)
+            result.scan = scan_levels(sets, result, config, client, say)
             result.pnlss_all = result.scan.best if result.scan is not None else None
         else:
-            result.pnlss_all = fit_levels(ready, result, config, "all levels", say)
-        if dataset.sines_planned and ready[0] is low:
+            result.pnlss_all = fit_levels(sets, result, config, "all levels", say)
+        if dataset.sines_planned and sets.levels[0] is low:
             # Level 1 is complete long before the campaign ends: refit its PNLSS only when its
             # kept periods changed.
             signature = level_signature(low, config)
@@ -274,29 +276,29 @@ def _fit_pnlss_models(
                 and previous.level1_signature == signature
             ):
                 result.pnlss_level1 = previous.pnlss_level1
-            elif len(ready) == 1:
+            elif len(sets.levels) == 1:
                 result.pnlss_level1 = result.pnlss_all  # the same data: the same fit
             else:
-                result.pnlss_level1 = fit_levels([low], result, config, "level 1", say)
+                level1 = EstimationSets.of([low], config)
+                result.pnlss_level1 = fit_levels(level1, result, config, "level 1", say)
             result.level1_signature = signature
     result.timings_s["pnlss"] = time.perf_counter() - t0
 
 
 def _fit_lpv_models(
-    result: IdentificationResult, config: IdentificationConfig, final_models: bool, say: Log
+    result: IdentificationResult,
+    sets: EstimationSets,
+    config: IdentificationConfig,
+    final_models: bool,
+    say: Log,
 ) -> None:
-    """The B-spline LPV model (bspline_lpv.py) on the PNLSS's training and held-out sets, from
-    the same linear model; scanned over its grid for the final models (``config.scan``)."""
-    ready = [
-        r
-        for r in result.levels.values()
-        if r.role == "estimation" and r.record.data is not None and r.linear is not None
-    ]
+    """The B-spline LPV model (bspline_lpv.py) on the estimation sets, from the PNLSS's linear
+    model; scanned over its grid for the final models (``config.scan``)."""
     lin = result.linear_level1
-    if not ready or lin is None:
+    if lin is None:
         return
     t0 = time.perf_counter()
-    train, held, _ = pnlss_sets(ready, config)
+    train, held = sets.train, sets.held
     degrees = (config.lpv_scan_state_degrees if final_models and config.scan
                else (config.lpv_state_degree,))  # fmt: skip
     intervals = (config.lpv_scan_intervals if final_models and config.scan
@@ -334,14 +336,11 @@ def _fit_lpv_models(
         f"{result.timings_s['lpv']:.1f} s")  # fmt: skip
 
 
-def select_model(result: IdentificationResult) -> dict[str, Any]:
+def select_model(result: IdentificationResult, sets: EstimationSets) -> dict[str, Any]:
     """The selected model: of the all-levels PNLSS and the B-spline LPV model, the one of
-    lower error on the held-out periods (scan.periodic_error, the scans' score; the sines are
-    not seen), with every candidate's error. Empty when neither is fitted or nothing is held
-    out."""
-    estimation = [
-        r for r in result.levels.values() if r.role == "estimation" and r.record.data is not None
-    ]
+    lower error on the estimation sets' held-out periods (scan.periodic_error, the scans'
+    score; the sines are not seen), with every candidate's error. Empty when neither is fitted
+    or nothing is held out."""
     models: dict[str, Any] = {}
     structures: dict[str, str] = {}
     if result.pnlss_all is not None:
@@ -350,12 +349,9 @@ def select_model(result: IdentificationResult) -> dict[str, Any]:
     if result.lpv_all is not None:
         models[SELECTED_LPV] = result.lpv_all
         structures[SELECTED_LPV] = result.lpv_all.describe()
-    if not models or not estimation:
+    if not models or sets.held is None:
         return {}
-    _, held, how = pnlss_sets(estimation, result.config)
-    if held is None:
-        return {}
-    scores = {name: periodic_error(m, held) for name, m in models.items()}
+    scores = {name: periodic_error(m, sets.held) for name, m in models.items()}
     finite = {n: s for n, s in scores.items() if math.isfinite(s[0])}
     if not finite:
         return {}
@@ -363,7 +359,7 @@ def select_model(result: IdentificationResult) -> dict[str, Any]:
     return {
         "class": chosen,
         "structure": structures[chosen],
-        "held_out": how,
+        "held_out": sets.how,
         "validation_errors": {n: s[0] for n, s in scores.items()},
         "validation_se": {n: s[1] for n, s in scores.items()},
     }
@@ -372,27 +368,24 @@ def select_model(result: IdentificationResult) -> dict[str, Any]:
 def _fit_semi_empirical(
     dataset: Dataset,
     result: IdentificationResult,
-    config: IdentificationConfig,
+    sets: EstimationSets | None,
     previous: IdentificationResult | None,
     say: Log,
 ) -> None:
-    """The Beddoes–Leishman baseline (beddoes_leishman.py) on the PNLSS's training and held-out
-    sets, its static curves from the quasi-static sweep; without a sweep, one warning says why
-    its Table 1 row is absent. The previous refit's model is reused when its sweep and sets are
-    the same (the fit is deterministic)."""
+    """The Beddoes–Leishman baseline (beddoes_leishman.py) on the estimation sets, its static
+    curves from the quasi-static sweep; without a sweep, one warning says why its Table 1 row
+    is absent. The previous refit's model is reused when its sweep and sets are the same (the
+    fit is deterministic)."""
     t0 = time.perf_counter()
-    ready = [
-        r for r in result.levels.values() if r.role == "estimation" and r.record.data is not None
-    ]
     if dataset.quasi_static is None:
         result.warnings.append(
             "Beddoes-Leishman baseline not fitted: the source has no quasi-static sweep (its "
             "static lift curve calibrates the model), so no table has a row for it"
         )
         return
-    if not ready:
+    if sets is None:
         return
-    train, held, _ = pnlss_sets(ready, config)
+    train, held = sets.train, sets.held
     digest = hashlib.sha256()
     for part in (dataset.quasi_static.alpha_up, dataset.quasi_static.cl_up,
                  dataset.quasi_static.alpha_down, dataset.quasi_static.cl_down, train.u, train.y,

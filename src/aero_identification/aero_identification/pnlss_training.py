@@ -1,5 +1,5 @@
-"""The all-levels PNLSS: its training and held-out sets, level weights, one fit and the
-structure scan's driver (step 3 of `pipeline.identify`; [PitchingWing] §4.1)."""
+"""The all-levels PNLSS on the estimation sets (estimation_sets.py): level weights, one fit and
+the structure scan's driver (step 3 of `pipeline.identify`; [PitchingWing] §4.1)."""
 
 import time
 from collections.abc import Iterator, Sequence
@@ -10,6 +10,7 @@ import numpy as np
 
 from .config import IdentificationConfig
 from .data import PeriodicData
+from .estimation_sets import EstimationSets, validation_realization
 from .level_models import kept_periods
 from .models import PNLSSModel
 from .monomials import structure_exponents
@@ -26,10 +27,7 @@ __all__ = [
     "level_weights",
     "noise_variance",
     "pnlss_parameters",
-    "pnlss_sets",
     "scan_levels",
-    "scan_split_count",
-    "validation_realization",
 ]
 
 # Largest Levenberg–Marquardt Jacobian a PNLSS fit may hold (bytes): one (samples × parameters)
@@ -38,83 +36,6 @@ __all__ = [
 MAX_JACOBIAN_BYTES = 1_000_000_000
 
 SCHEDULER_CONNECT_S = 30.0  # how long a scan or bootstrap tries to reach scan_scheduler
-
-
-def validation_realization(data: PeriodicData, config: IdentificationConfig) -> int | None:
-    """Which realization holds the PNLSS fit's held-out periods: ``config.
-    validation_realization`` (the last one if there are fewer); None with M = 1."""
-    if data.M < 2:
-        return None
-    return min(config.validation_realization, data.M - 1)
-
-
-def pnlss_sets(
-    levels: Sequence[LevelResult], config: IdentificationConfig, fold: int = 0
-) -> tuple[PeriodicData, PeriodicData | None, str]:
-    """Training and held-out sets of the PNLSS fit, one steady-state mean period per record.
-
-    Training: per level, the mean of the kept periods of every realization except the held-out
-    one (one record per level and realization). The input is periodic, so Σ_p ||ŷ − y_p||² =
-    P ||ŷ − ȳ||² + const: the same least-squares problem as fitting every period, P times
-    cheaper. Held out (chooses the iterate): the mean of the kept periods of realization
-    `validation_realization` when M ≥ 2; with M = 1 the last period (independent noise, same
-    excitation) and the training mean is over the others; with one period, none.
-
-    ``fold`` k > 0: the structure scan's cross-fit split k (`scan_splits`): the realization k
-    places after `validation_realization` (cyclically) is held out instead, or with M = 1 the
-    period k places before the last.
-    """
-    us: list[np.ndarray] = []
-    ys: list[np.ndarray] = []
-    uv: list[np.ndarray] = []
-    yv: list[np.ndarray] = []
-    how = ""
-    for res in levels:
-        d = res.record.data
-        assert d is not None
-        val = validation_realization(d, config)
-        if val is not None:
-            val = (val + fold) % d.M
-            how = f"realization {int(d.realization_index[val])} of each level"
-            for m in range(d.M):
-                cols = kept_periods(res, m)
-                target = (uv, yv) if m == val else (us, ys)
-                target[0].append(d.u[:, cols, m].mean(axis=1))
-                target[1].append(d.y[:, cols, m].mean(axis=1))
-        elif d.P >= 2:
-            cols = kept_periods(res, 0)
-            last = len(cols) - 1 - fold % len(cols)  # the held-out period's position
-            how = "the last period of each level" if fold == 0 else f"kept period {last}"
-            rest = np.delete(cols, last)
-            us.append(d.u[:, rest, 0].mean(axis=1))
-            ys.append(d.y[:, rest, 0].mean(axis=1))
-            uv.append(d.u[:, cols[last], 0])
-            yv.append(d.y[:, cols[last], 0])
-        else:
-            us.append(d.u[:, 0, 0])
-            ys.append(d.y[:, 0, 0])
-    first = levels[0].record.data
-    assert first is not None
-
-    def stack(parts: list[np.ndarray]) -> np.ndarray:
-        return np.stack(parts, axis=1)[:, None, :]  # (N, 1, records)
-
-    train = PeriodicData(stack(us), stack(ys), first.fs, first.excited_lines)
-    if len(uv) != len(levels):
-        return train, None, "none (a level has one period and one realization)"
-    held = PeriodicData(stack(uv), stack(yv), first.fs, first.excited_lines)
-    return train, held, how
-
-
-def scan_split_count(levels: Sequence[LevelResult]) -> int:
-    """How many distinct held-out sets `pnlss_sets` can make: the fewest realizations of any
-    level, or of kept periods where a level has one realization."""
-    counts = []
-    for res in levels:
-        d = res.record.data
-        assert d is not None
-        counts.append(d.M if d.M >= 2 else len(kept_periods(res, 0)))
-    return min(counts, default=1)
 
 
 def pnlss_parameters(nx: int, degrees: Sequence[int], structure: str, equations: str) -> int:
@@ -129,7 +50,7 @@ def jacobian_bytes(data: PeriodicData, n_par: int) -> int:
 
 
 def fit_levels(
-    levels: Sequence[LevelResult],
+    sets: EstimationSets,
     result: IdentificationResult,
     config: IdentificationConfig,
     label: str,
@@ -137,8 +58,8 @@ def fit_levels(
 ) -> PNLSSModel | None:
     """One PNLSS structure (config.degrees, config.structure), started from the lowest level's
     linear model with its output equation solved by least squares (`output_equation_start`)."""
-    data, validation, how = pnlss_sets(levels, config)
-    result.pnlss_held_out = how
+    data, validation = sets.train, sets.held
+    result.pnlss_held_out = sets.how
     lin = result.linear_level1
     assert lin is not None
     n_par = pnlss_parameters(lin.nx, config.degrees, config.structure, "state+output")
@@ -154,7 +75,7 @@ def fit_levels(
         return None
     t0 = time.perf_counter()
     try:
-        weights, val_weights = level_weights(levels, config, data, validation)
+        weights, val_weights = level_weights(sets.levels, config, data, validation)
         settings = PnlssSettings(
             degrees=config.degrees, structure=config.structure, max_iter=config.max_iter
         )
@@ -174,7 +95,7 @@ def fit_levels(
 
 
 def scan_levels(
-    levels: Sequence[LevelResult],
+    sets: EstimationSets,
     result: IdentificationResult,
     config: IdentificationConfig,
     client: Any,
@@ -184,20 +105,16 @@ def scan_levels(
     sets: every order of ``config.scan_nx`` (0: the lowest level's linear order) started from the
     lowest level's BLA; candidates whose Jacobian would exceed MAX_JACOBIAN_BYTES are left out
     and named."""
-    data, validation, how = pnlss_sets(levels, config)
-    result.pnlss_held_out = how
-    low = levels[0]
+    data, validation = sets.train, sets.held
+    result.pnlss_held_out = sets.how
+    low = sets.levels[0]
     lin = result.linear_level1
     if validation is None:
         result.warnings.append("PNLSS structure scan: no held-out periods to score candidates")
         return None
     if low.bla is None or lin is None:
         return None
-    splits = []
-    for fold in range(1, min(config.scan_splits, scan_split_count(levels))):
-        train_k, held_k, _ = pnlss_sets(levels, config, fold)
-        assert held_k is not None  # every level has a held-out set (checked above) in any fold
-        splits.append((train_k, held_k))
+    splits = sets.folds(config)
     grid = _grid_within_limit(data, lin.nx, config, result.warnings)
     if grid is None:
         return None
@@ -210,7 +127,7 @@ def scan_levels(
                 fit_linear_ss(low.bla, nx=n).with_operating_point(u0, y0))
             for n in orders
         }  # fmt: skip
-        weights, val_weights = level_weights(levels, config, data, validation)
+        weights, val_weights = level_weights(sets.levels, config, data, validation)
         t0 = time.perf_counter()
         with fit_client(config, client) as executor:
             scan = scan_pnlss(
@@ -317,13 +234,14 @@ def level_weights(
     data: PeriodicData,
     validation: PeriodicData | None,
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Record weights of `pnlss_sets`' training and held-out sets (config.level_weighting).
+    """Record weights of the estimation sets' training and held-out records
+    (config.level_weighting).
 
     "noise": each level's records by 1 / the noise variance of its mean period
     (`noise_variance`), the weighted least squares that is the maximum-likelihood output-error
     estimator under Gaussian noise of level-dependent variance [Pintelon2012]
     [Paduart2010: the PNLSS cost weighted by the inverse noise variance]. The records follow
-    `pnlss_sets`' order: per level, its training realizations (or its one training mean)."""
+    `estimation_sets`' order: per level, its training realizations (or its one training mean)."""
     weighting = config.level_weighting
     if weighting == "none":
         return None, None
@@ -340,7 +258,7 @@ def level_weights(
         assert d is not None
         counts.append(d.M - 1 if validation_realization(d, config) is not None else 1)
     train = np.repeat(w, counts)
-    if train.size != data.y.shape[2]:  # pnlss_sets' record order changed: fail loudly
+    if train.size != data.y.shape[2]:  # estimation_sets' record order changed: fail loudly
         raise ValueError(f"noise weighting: {train.size} weights for {data.y.shape[2]} records")
     return train, (w if validation is not None else None)
 

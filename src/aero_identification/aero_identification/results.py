@@ -146,7 +146,7 @@ class IdentificationResult:
     pnlss_level1: PNLSSModel | None = None
     linear_level1: LinearStateSpace | None = None
     pnlss_start_level: str = ""  # the level whose linear model started the PNLSS fits
-    pnlss_held_out: str = ""  # what chose the PNLSS iterate (pnlss_training.pnlss_sets)
+    pnlss_held_out: str = ""  # what chose the PNLSS iterate (estimation_sets.estimation_sets)
     errors_all: dict[tuple[str, str, float], float] = field(default_factory=dict)
     errors_level1: dict[tuple[str, str, float], float] = field(default_factory=dict)
     # Table 1's ± per cell, same keys: std over the sine's periods of the per-period error

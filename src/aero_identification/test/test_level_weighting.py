@@ -9,8 +9,9 @@ from aero_identification import pnlss_training
 from aero_identification.config import IdentificationConfig
 from aero_identification.data import PeriodicData, random_phase_period
 from aero_identification.dataset import Dataset, LevelRecord
+from aero_identification.estimation_sets import estimation_sets
 from aero_identification.pipeline import identify
-from aero_identification.pnlss_training import level_weights, noise_variance, pnlss_sets
+from aero_identification.pnlss_training import level_weights, noise_variance
 from aero_identification.results import LevelResult
 
 N, P, M = 64, 5, 3
@@ -31,12 +32,13 @@ def test_noise_variance_is_that_of_the_mean_period() -> None:
     assert noise_variance(res) == pytest.approx(0.04 / P, rel=0.15)
 
 
-def test_noise_weighting_follows_pnlss_sets_records() -> None:
+def test_noise_weighting_follows_estimation_sets_records() -> None:
     """Each training and held-out record gets 1 / its level's noise variance, in the order
-    `pnlss_sets` builds them; the quiet level outweighs the noisy one by their variance ratio."""
+    `estimation_sets` builds them; the quiet level outweighs the noisy one by their variance
+    ratio."""
     levels = [_level("low", 0.05, seed=2), _level("high", 0.5, seed=3)]
     config = dataclasses.replace(IdentificationConfig(), level_weighting="noise")
-    data, validation, _ = pnlss_sets(levels, config)
+    data, validation, _ = estimation_sets(levels, config)
     assert validation is not None
     train, held = level_weights(levels, config, data, validation)
     assert train is not None and held is not None
@@ -52,7 +54,7 @@ def test_other_weightings_unchanged() -> None:
     """'none' weighs nothing; 'relative' gives 1 / var(each record's output)."""
     levels = [_level("low", 0.05, seed=4), _level("high", 0.5, seed=5)]
     base = IdentificationConfig()
-    data, validation, _ = pnlss_sets(levels, base)
+    data, validation, _ = estimation_sets(levels, base)
     assert level_weights(levels, base, data, validation) == (None, None)
     rel = dataclasses.replace(base, level_weighting="relative")
     train, _ = level_weights(levels, rel, data, validation)
