@@ -7,6 +7,7 @@ commands are refused (a state still comes back for their stamp), and a lost comm
 Times below are experiment time: the states' stamps (5 ms apart at fs = 200 Hz).
 """
 
+import json
 import math
 import time
 from pathlib import Path
@@ -18,6 +19,7 @@ from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 
 from rig_runtime.interface import (
     ALPHA_TRUE_JOINT,
+    EXPERIMENT_SEGMENT,
     PITCH_COMMAND,
     PITCH_JOINT,
     PITCH_STATE,
@@ -51,6 +53,9 @@ class ActuatorClient:
             PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )
         self.stop_pub = self.node.create_publisher(PITCH_STOP.type, PITCH_STOP.name)
+        self.segment_pub = self.node.create_publisher(
+            EXPERIMENT_SEGMENT.type, EXPERIMENT_SEGMENT.name, EXPERIMENT_SEGMENT.qos
+        )
         self.states: list[tuple[int, float, float]] = []  # stamp, pitch [deg], alpha_true [deg]
         self.diagnostics: list[dict[str, str]] = []
         self.peers = PeerReaders(self.node)
@@ -75,8 +80,11 @@ class ActuatorClient:
             lambda: (
                 self.cmd.subscription_count() > 0
                 and self.stop_pub.subscription_count() > 0
+                and self.segment_pub.subscription_count() > 0
                 and all(sub.publisher_count() > 0 for sub in self.subs)
-                and self.peers.matched([PITCH_COMMAND.name, PITCH_STOP.name])
+                and self.peers.matched(
+                    [PITCH_COMMAND.name, PITCH_STOP.name, EXPERIMENT_SEGMENT.name]
+                )
             ),
             timeout_s,
         )
@@ -111,6 +119,12 @@ class ActuatorClient:
 
     def _range(self, first: int) -> set[int]:
         return {self.stamp(k) for k in range(first, self.next_k)}
+
+    def end_plan(self) -> None:
+        """The generator's plan_end event (multisine_gen.generator_node)."""
+        event = {"event": "plan_end", "samples": self.next_k, "fs": FS, "t0_ns": self.t0_ns}
+        self.segment_pub.publish(self.node.new_message("std_msgs/msg/String",
+                                                       data=json.dumps(event)))  # fmt: skip
 
     def request_stop(self, stop: bool = True) -> None:
         self.stop_pub.publish(self.node.new_message("std_msgs/msg/Bool", data=stop))
@@ -261,6 +275,38 @@ def test_lost_command_stream_holds_then_ramps_to_safe_angle(actuator: Any) -> No
     _check_hold_then_ramp(t, pitch, t_last, 12.0, (trip + HOLD_S, trip + HOLD_S + 0.06))
     diag = client.wait_diagnostics(lambda d: d.get("mode") == "safe")
     assert int(diag["watchdog_trips"]) == 1
+
+
+def test_the_plans_end_then_silence_holds_and_ramps_with_no_error_line(actuator: Any) -> None:
+    """The plan's end disarms the stream watchdog: the silence after it holds, then ramps to
+    the safe angle as after a trip, but the node trips nothing and logs no ERROR line."""
+    client, procs = actuator(
+        stream_timeout_s=0.2,
+        watchdog_timeout_s=WATCHDOG_S,
+        hold_s=HOLD_S,
+        ramp_rate_deg_s=RAMP_DEG_S,
+        safe_angle_deg=SAFE_DEG,
+    )
+    client.drive([12.0] * 100)
+    client.end_plan()
+    # Commands flow until the node's diagnostics say it expects the stream's end (no race
+    # between the event and the watchdog), then they stop as at a plan's end.
+    deadline = time.monotonic() + 30.0
+    while not any(d.get("stream_end_expected") == "True" for d in client.diagnostics):
+        assert time.monotonic() < deadline, "the node never took the plan's end"
+        client.drive([12.0] * 10)
+    t_last = (client.stamp(client.next_k - 1) - client.t0_ns) / 1e9
+    t_end = t_last + WATCHDOG_S + HOLD_S + (12.0 - SAFE_DEG) / RAMP_DEG_S + 0.3
+    done = client.node.spin_until(lambda: client.series()[0][-1] >= t_end, 15.0)
+    assert done, f"states stopped at {client.series()[0][-1]:.3f} s, wanted {t_end:.3f} s"
+    diag = client.wait_diagnostics(lambda d: d.get("mode") == "safe", 15.0)
+    assert diag["watchdog_trips"] == "0", diag
+    t, pitch = client.series()
+    hold_end = t_last + WATCHDOG_S + HOLD_S
+    _check_hold_then_ramp(t, pitch, t_last, 12.0, (hold_end, hold_end + 0.06))
+    log = procs.log("sim_actuator")
+    assert "the plan has ended" in log, log
+    assert [line for line in log.splitlines() if "ERROR" in line] == [], log
 
 
 def test_stop_request_holds_then_ramps_while_commands_flow(actuator: Any) -> None:

@@ -17,7 +17,13 @@ import numpy as np
 import pytest
 from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 
-from rig_runtime.interface import PITCH_COMMAND, PITCH_JOINT, PITCH_STATE, joint_position
+from rig_runtime.interface import (
+    EXPERIMENT_SEGMENT,
+    PITCH_COMMAND,
+    PITCH_JOINT,
+    PITCH_STATE,
+    joint_position,
+)
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
 from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
@@ -49,6 +55,9 @@ class HwClient:
         self.cmd = self.node.create_publisher(
             PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
         )
+        self.segment_pub = self.node.create_publisher(
+            EXPERIMENT_SEGMENT.type, EXPERIMENT_SEGMENT.name, EXPERIMENT_SEGMENT.qos
+        )
         self.states: list[tuple[int, float]] = []  # controller stamp [ns], pitch [deg]
         self.diagnostics: list[tuple[str, dict[str, str]]] = []  # hardware_id, values
         self.sent: list[tuple[int, float]] = []  # wall ns, command [rad]
@@ -73,8 +82,9 @@ class HwClient:
         return self.node.spin_until(
             lambda: (
                 self.cmd.subscription_count() > 0
+                and self.segment_pub.subscription_count() > 0
                 and all(sub.publisher_count() > 0 for sub in self.subs)
-                and self.peers.matched([PITCH_COMMAND.name])
+                and self.peers.matched([PITCH_COMMAND.name, EXPERIMENT_SEGMENT.name])
                 and len(self.states) > 10
             ),
             timeout_s,
@@ -104,6 +114,13 @@ class HwClient:
             next_tick = start + k / COMMAND_HZ
             while (remaining := next_tick - time.monotonic()) > 0:
                 self.node.spin_once(remaining)
+
+    def end_plan(self) -> None:
+        """The generator's plan_end event (multisine_gen.generator_node)."""
+        event = {"event": "plan_end", "samples": len(self.sent), "fs": COMMAND_HZ}
+        self.segment_pub.publish(
+            self.node.new_message("std_msgs/msg/String", data=json.dumps(event))
+        )
 
     def series(self) -> tuple[np.ndarray, np.ndarray]:
         stamps = np.array([s for s, _ in self.states], dtype=np.int64)
@@ -306,3 +323,32 @@ def test_limits_on_host_then_hold_and_ramp_when_commands_stop(rig: Any) -> None:
     assert int(diag["clamped"]) >= 100
     assert int(diag["watchdog_trips"]) == 1
     assert "controller_limit" not in diag  # the controller never had to clamp
+
+
+def test_the_plans_end_then_silence_holds_and_ramps_with_no_error_line(rig: Any) -> None:
+    """After the generator's plan_end the silence is the plan's end: the host holds, then ramps
+    to the safe angle, with no watchdog trip and no ERROR line in its log."""
+    client, procs, _ = rig(
+        controller_watchdog_s=FORWARDING_WATCHDOG_S,
+        watchdog_timeout_s=WATCHDOG_S,
+        hold_s=HOLD_S,
+        ramp_rate_deg_s=RAMP_DEG_S,
+        safe_angle_deg=SAFE_DEG,
+    )
+    client.stream(lambda t: 12.0, 0.5)
+    client.end_plan()
+    # Commands flow until the node's diagnostics show it took the plan's end, then stop.
+    deadline = time.monotonic() + 30.0
+    while not any(d.get("stream_end_expected") == "True" for _, d in client.diagnostics):
+        assert time.monotonic() < deadline, "the node never took the plan's end"
+        client.stream(lambda t: 12.0, 0.1)
+    _, diag = client.wait_diagnostics(lambda d: d.get("mode") == "safe", 30.0)
+    assert diag["watchdog_trips"] == "0", diag
+    n = len(client.states)
+    assert client.node.spin_until(lambda: len(client.states) >= n + 40, 10.0)
+    stamps, pitch = client.series()
+    after = pitch[stamps > client.sent[-1][0]]
+    assert after.max() <= 12.1 and np.all(np.abs(after[-20:] - SAFE_DEG) < 0.1), after
+    log = procs.log("hw_actuator")
+    assert "the plan has ended" in log, log
+    assert [line for line in log.splitlines() if "ERROR" in line] == [], log

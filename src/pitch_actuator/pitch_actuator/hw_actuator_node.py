@@ -13,13 +13,20 @@ feedback), so the experiment cannot start against a controller that is off or un
 Commands not followed exactly and watchdog trips are reported on ``/experiment/anomaly``.
 """
 
+import json
 import math
 import sys
 import time
 from typing import Any
 
 from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
-from rig_runtime.interface import PITCH_COMMAND, PITCH_JOINT, PITCH_STATE, PITCH_STOP
+from rig_runtime.interface import (
+    EXPERIMENT_SEGMENT,
+    PITCH_COMMAND,
+    PITCH_JOINT,
+    PITCH_STATE,
+    PITCH_STOP,
+)
 
 from .actuator_common import (
     LIMIT_PARAMETERS,
@@ -97,6 +104,13 @@ class HwActuator:
             f"{p['controller_host']}:{p['controller_port']} yet",
         )
         node.create_subscription(PITCH_STOP.type, PITCH_STOP.name, self.on_stop)
+        # The silence after the plan's last command is its end, not a lost stream.
+        node.create_subscription(
+            EXPERIMENT_SEGMENT.type,
+            EXPERIMENT_SEGMENT.name,
+            self.on_segment,
+            EXPERIMENT_SEGMENT.qos,
+        )
         node.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
         node.create_timer(p["diagnostics_period_s"], self.update_link_diagnostics)
         self.published = 0
@@ -126,6 +140,10 @@ class HwActuator:
             stamp_to_ns(msg.header.stamp), commanded_deg, setpoint_deg, catch_up=catch_up
         )
         self._send(setpoint_deg)
+
+    def on_segment(self, msg: Any) -> None:
+        if json.loads(msg.data).get("event") == "plan_end":
+            self.governor.end_stream(self._now(), "the plan has ended")
 
     def on_stop(self, msg: Any) -> None:
         if msg.data:

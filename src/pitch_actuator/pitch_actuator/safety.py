@@ -162,6 +162,9 @@ class SafetyGovernor:
     setpoint to the actuator. The watchdog is armed by the first accepted command: before it
     (mode IDLE) the setpoint holds the initial position. After a watchdog trip, a new command
     resumes tracking (rate limited, reported); after `stop()`, only `resume()` does.
+    `end_stream()` says the stream's end is planned (the plan has ended): the silence after
+    the last command then holds and ramps as after a trip, reported at OK level and not counted
+    as a trip; a stream that resumes after it is watched again.
     """
 
     def __init__(
@@ -192,6 +195,9 @@ class SafetyGovernor:
         self._mode = GovernorMode.IDLE
         self._stopped = False
         self._tripped = False
+        self._end_expected = False  # end_stream(): the next silence is the plan's end
+        self._end_reason = ""
+        self._planned_hold = False  # holding/ramping because the stream ended as planned
         self._hold_until = math.inf
         self._last_command_t = -math.inf
         self._reported_since_status = False
@@ -229,6 +235,11 @@ class SafetyGovernor:
     @property
     def t_s(self) -> float:
         return self._t
+
+    @property
+    def end_expected(self) -> bool:
+        """True after `end_stream()` until a command resumes the stream after the silence."""
+        return self._end_expected
 
     # -- inputs ---------------------------------------------------------------------------------
     def command(self, t_s: float, command_deg: float) -> float:
@@ -280,7 +291,15 @@ class SafetyGovernor:
                         "resumed",
                         f"command stream resumed after watchdog trip at {self._setpoint:.3f}°",
                     )
+                elif self._planned_hold:
+                    self._emit(
+                        DiagnosticLevel.OK,
+                        "resumed",
+                        f"command stream resumed after the plan's end at {self._setpoint:.3f}°",
+                    )
+                    self._end_expected = False  # a new stream: its loss trips the watchdog
                 self._tripped = False
+                self._planned_hold = False
                 self._mode = GovernorMode.TRACKING
                 self._hold_until = math.inf
             self._target = target
@@ -296,6 +315,18 @@ class SafetyGovernor:
     def update(self, t_s: float) -> float:
         """Advance the governor's time without a command; return the setpoint (degrees)."""
         return self._advance(self._checked_time(t_s))
+
+    def end_stream(self, t_s: float, reason: str = "the command stream has ended") -> float:
+        """The command stream's end is planned (the plan has ended): the watchdog is disarmed
+        for the silence that follows. Commands still in flight are tracked as before; once none
+        has come for watchdog_timeout_s the setpoint holds for hold_s, then ramps to the safe
+        angle, reported at OK level (not a trip). A command after that silence starts a new
+        stream, watched again."""
+        t = self._checked_time(t_s)
+        setpoint = self._advance(t)
+        self._end_expected = True
+        self._end_reason = reason
+        return setpoint
 
     def stop(self, t_s: float, reason: str = "stop requested") -> float:
         """Stop: hold for hold_s, then ramp to the safe angle; commands ignored until resume."""
@@ -321,6 +352,7 @@ class SafetyGovernor:
         if self._stopped:
             self._stopped = False
             self._tripped = False
+            self._planned_hold = False
             self._mode = GovernorMode.IDLE
             self._hold_until = math.inf
             self._target = self._setpoint
@@ -348,6 +380,7 @@ class SafetyGovernor:
         self._reported_since_status = False
         values = {f.name: str(getattr(self.counters, f.name)) for f in fields(self.counters)}
         values["mode"] = self._mode.value
+        values["stream_end_expected"] = str(self._end_expected)
         values["setpoint_deg"] = f"{self._setpoint:.4f}"
         return GovernorStatus(level, message, self._mode, self._setpoint, values)
 
@@ -408,15 +441,25 @@ class SafetyGovernor:
                     setpoint = _move_toward(setpoint, self._target, lim.max_rate_deg_s * dt)
                     self._t = max(trip_t, self._t)
                     self._setpoint = setpoint
-                    self._tripped = True
-                    self.counters.watchdog_trips += 1
-                    self._emit(
-                        DiagnosticLevel.ERROR,
-                        "watchdog",
-                        f"no pitch command for {lim.watchdog_timeout_s} s: holding "
-                        f"{setpoint:.3f}° for {lim.hold_s} s, then ramping to "
-                        f"{lim.safe_angle_deg}° at {lim.ramp_rate_deg_s}°/s",
+                    then = (
+                        f"holding {setpoint:.3f}° for {lim.hold_s} s, then ramping to "
+                        f"{lim.safe_angle_deg}° at {lim.ramp_rate_deg_s}°/s"
                     )
+                    if self._end_expected:
+                        self._planned_hold = True
+                        self._emit(
+                            DiagnosticLevel.OK,
+                            "stream_end",
+                            f"{self._end_reason}: no pitch command since; {then}",
+                        )
+                    else:
+                        self._tripped = True
+                        self.counters.watchdog_trips += 1
+                        self._emit(
+                            DiagnosticLevel.ERROR,
+                            "watchdog",
+                            f"no pitch command for {lim.watchdog_timeout_s} s: {then}",
+                        )
                     self._enter_hold(self._t)
             elif mode is GovernorMode.HOLDING:
                 if t < self._hold_until:
@@ -431,7 +474,11 @@ class SafetyGovernor:
                     setpoint = lim.safe_angle_deg
                     self._setpoint = setpoint
                     self._mode = GovernorMode.SAFE
-                    self._emit(DiagnosticLevel.WARN, "safe", f"at safe angle {lim.safe_angle_deg}°")
+                    self._emit(
+                        DiagnosticLevel.OK if self._planned_hold else DiagnosticLevel.WARN,
+                        "safe",
+                        f"at safe angle {lim.safe_angle_deg}°",
+                    )
                 else:
                     step = lim.ramp_rate_deg_s * (t - self._t)
                     setpoint = _move_toward(setpoint, lim.safe_angle_deg, step)

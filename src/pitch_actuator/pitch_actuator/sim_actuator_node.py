@@ -152,6 +152,8 @@ class SimActuator:
     def on_segment(self, msg: Any) -> None:
         if json.loads(msg.data).get("event") == "plan_end":
             self.plan_ended = True
+            # The silence after the last command is the plan's end, not a lost stream.
+            self.governor.end_stream(self.governor.t_s, "the plan has ended")
 
     def on_stop(self, msg: Any) -> None:
         t = self._time_s(self.last_stamp_ns or time.time_ns())

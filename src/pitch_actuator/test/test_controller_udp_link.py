@@ -6,6 +6,7 @@ import math
 import socket
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +40,36 @@ def _audit(path: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines()]
 
 
+EIGHT = math.radians(8.0)
+
+
+def at_rest(f: Feedback, position_rad: float) -> bool:
+    """Within 0.1° of the position and slower than 1°/s (not a pass on the way)."""
+    return abs(f.position_rad - position_rad) < math.radians(0.1) and abs(
+        f.velocity_rad_s
+    ) < math.radians(1.0)
+
+
+def hold_setpoint(
+    link: ControllerLink,
+    received: list[Feedback],
+    setpoint_deg: float,
+    reached: Callable[[Feedback], bool],
+    timeout_s: float = 10.0,
+) -> Feedback:
+    """Send ``setpoint_deg`` at the host's control period (5 ms) until a feedback that echoes
+    the last one sent satisfies ``reached``; that feedback (bounded: fails after timeout_s)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        seq = link.send_setpoint(math.radians(setpoint_deg))
+        # one control period, or until the controller echoes it
+        wait_until(lambda s=seq: received and received[-1].applied_seq >= s, 0.005, poll_s=0.001)
+        last = received[-1] if received else None
+        if last is not None and last.applied_seq == seq and reached(last):
+            return last
+    raise AssertionError(f"no feedback reached {setpoint_deg}° in {timeout_s} s: {received[-1:]}")
+
+
 def test_setpoints_are_followed_echoed_and_clamped_to_the_controller_limits(
     tmp_path: Path,
 ) -> None:
@@ -50,14 +81,8 @@ def test_setpoints_are_followed_echoed_and_clamped_to_the_controller_limits(
     try:
         received: list[Feedback] = []
         link.start(received.append)
-        last_seq = 0
-        for _ in range(60):  # 0.3 s at 8°: settles (ω_n = 2π·15 rad/s)
-            last_seq = link.send_setpoint(math.radians(8.0))
-            time.sleep(0.005)
-        assert wait_until(lambda: received and received[-1].applied_seq == last_seq, 2.0), (
-            "no feedback echoed the last setpoint"
-        )
-        settled = received[-1]
+        # The host's loop sends 8° until a feedback that echoes it shows the pitch settled there.
+        settled = hold_setpoint(link, received, 8.0, lambda f: at_rest(f, EIGHT))
         assert settled.status & Status.ENABLED and not settled.status & Status.HOLDING
         assert settled.applied_session == link.session
         assert settled.position_rad == pytest.approx(math.radians(8.0), abs=math.radians(0.1))
@@ -66,10 +91,8 @@ def test_setpoints_are_followed_echoed_and_clamped_to_the_controller_limits(
         assert all(b > a for a, b in itertools.pairwise(stamps))
         assert abs(stamps[-1] - time.time_ns()) < 1e9
 
-        for _ in range(80):  # 20° asked, the controller's own hard limit is 12°
-            link.send_setpoint(math.radians(20.0))
-            time.sleep(0.005)
-        clamped = received[-1]
+        # 20° asked, the controller's own hard limit is 12°: it settles on the limit.
+        clamped = hold_setpoint(link, received, 20.0, lambda f: at_rest(f, math.radians(12.0)))
         assert clamped.status & Status.LIMIT
         assert clamped.target_rad == pytest.approx(math.radians(12.0))
         # The commanded target never passes the limit (the position may overshoot it by the

@@ -124,6 +124,52 @@ def test_watchdog_holds_then_ramps_to_safe_angle() -> None:
     assert gov.status().level is DiagnosticLevel.ERROR
 
 
+def test_the_plans_end_disarms_the_watchdog_hold_and_ramp_without_error() -> None:
+    """After `end_stream` (the plan has ended) the silence that follows is expected: the same
+    hold → ramp → safe as a trip, but no watchdog trip, no ERROR event and an OK status. The
+    plan's last commands may still arrive after the plan's end; they are tracked as before."""
+    gov = SafetyGovernor(LIMITS, initial_deg=0.0)
+    for k in range(1, 191):
+        gov.command(k / FS, 12.0)
+    gov.end_stream(190 / FS, "the plan has ended")
+    for k in range(191, 201):  # the last commands, delivered after the plan's end
+        gov.command(k / FS, 12.0)
+    assert gov.mode is GovernorMode.TRACKING
+    t_last = 200 / FS
+    trace = _ticks(gov, t_last + 0.001, t_last + 4.0, 0.001)
+    t, sp = trace[:, 0], trace[:, 1]
+    t_ramp = t_last + LIMITS.watchdog_timeout_s + LIMITS.hold_s
+    t_safe = t_ramp + (12.0 - LIMITS.safe_angle_deg) / LIMITS.ramp_rate_deg_s
+    assert np.all(sp[t <= t_ramp] == 12.0)
+    ramping = (t > t_ramp + 0.01) & (t < t_safe - 0.01)
+    np.testing.assert_allclose(
+        sp[ramping], 12.0 - LIMITS.ramp_rate_deg_s * (t[ramping] - t_ramp), atol=1e-9
+    )
+    assert np.all(sp[t >= t_safe] == LIMITS.safe_angle_deg)
+    assert gov.mode is GovernorMode.SAFE
+    assert gov.counters.watchdog_trips == 0
+    events = gov.drain_events()
+    assert [e.kind for e in events] == ["stream_end", "safe"], events
+    assert all(e.level < DiagnosticLevel.ERROR for e in events), events
+    assert "the plan has ended" in events[0].message and "holding 12.000°" in events[0].message
+    assert gov.status().level is DiagnosticLevel.OK
+
+
+def test_a_command_stream_resumed_after_the_plans_end_is_watched_again() -> None:
+    """A new stream after the plan's end (the next run) re-arms the watchdog: its loss trips."""
+    gov = SafetyGovernor(LIMITS, initial_deg=0.0)
+    gov.command(0.005, 5.0)
+    gov.end_stream(0.005, "the plan has ended")
+    gov.update(0.4)  # silent: holding, no trip
+    assert gov.mode is GovernorMode.HOLDING and gov.counters.watchdog_trips == 0
+    for k in range(1, 30):
+        gov.command(0.4 + k / FS, 8.0)
+    assert gov.mode is GovernorMode.TRACKING
+    gov.update(1.0)
+    assert gov.counters.watchdog_trips == 1
+    assert [e.kind for e in gov.drain_events()] == ["stream_end", "resumed", "watchdog"]
+
+
 def test_command_stream_resuming_after_watchdog_is_tracked_rate_limited() -> None:
     gov = SafetyGovernor(LIMITS, initial_deg=5.0)
     gov.command(0.005, 5.0)
