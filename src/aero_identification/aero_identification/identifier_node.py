@@ -47,11 +47,19 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
     joint_position,
 )
+from rig_runtime.params import ParameterSet
 
 from .identification_session import IdentificationSession
 from .identifier_settings import PARAMETERS, identifier_settings
 
 TIMER_PERIOD_S = 0.1  # intake timer: refits start, worker results are collected
+
+
+def check_parameters(p: ParameterSet) -> None:
+    """What the identifier refuses at its start (ValueError): settings that do not make an
+    identification configuration. The launchers run it before any node starts
+    (rig_runtime.launcher.check_node)."""
+    identifier_settings(p.as_dict())
 
 
 class Identifier:

@@ -58,6 +58,7 @@ from rig_runtime.interface import (
     WING_PROGRESS,
     ActuatorLimits,
 )
+from rig_runtime.params import ParameterSet
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
 from .campaigns import default_plan, short_plan
@@ -139,6 +140,21 @@ def load_plan(spec: str, seed: int) -> ExperimentPlan:
     return plan_from_json(path.read_text())
 
 
+def check_parameters(p: ParameterSet) -> tuple[ActuatorLimits, Adaptation, ExperimentPlan]:
+    """What the generator refuses before it publishes anything: adaptive bounds that cannot
+    hold, a plan that does not load, or one that would leave the actuator's limits (ValueError).
+    The launchers run it before any node starts (rig_runtime.launcher.check_node)."""
+    limits = ActuatorLimits(
+        min_deg=p["min_deg"], max_deg=p["max_deg"], max_rate_deg_s=p["max_rate_deg_s"]
+    )
+    adaptation = Adaptation(
+        p["adaptive_min_periods"], p["adaptive_min_realizations"], p["adaptive_max_realizations"]
+    )
+    plan = load_plan(p["plan"], p["seed"])
+    plan.validate(limits)
+    return limits, adaptation, plan
+
+
 DIAGNOSTICS_PERIOD_S = 1.0  # the progress heartbeat on /diagnostics
 
 
@@ -146,17 +162,8 @@ class Generator:
     def __init__(self, node: Node) -> None:
         self.node = node
         p = node.params
-        self.limits = ActuatorLimits(
-            min_deg=p["min_deg"], max_deg=p["max_deg"], max_rate_deg_s=p["max_rate_deg_s"]
-        )
-        self.adaptation = Adaptation(
-            p["adaptive_min_periods"],
-            p["adaptive_min_realizations"],
-            p["adaptive_max_realizations"],
-        )
-        plan = load_plan(p["plan"], p["seed"])
         # Refuse before publishing anything if the plan would leave the actuator's limits.
-        plan.validate(self.limits)
+        self.limits, self.adaptation, plan = check_parameters(p)
         self.fs = plan.fs
         self._use(plan)
         self.planned_samples = self.total

@@ -19,6 +19,7 @@
 """
 
 import argparse
+import importlib
 import os
 import re
 import signal
@@ -32,7 +33,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .graph import GraphError, GraphSpec, NodeSpec, entry_point, load_graph
+from .graph import GraphError, GraphSpec, NodeSpec, entry_point, load_graph, yaml_scalar
+from .params import ParameterError, resolve_parameters
 from .ros_environment import (
     LAUNCHER_PID_ENV,
     PARTICIPANT_LEASE_S,
@@ -146,6 +148,11 @@ class Launcher:
     def local_nodes(self) -> tuple[NodeSpec, ...]:
         """The nodes this launcher starts."""
         return tuple(n for n in self.graph.nodes if n.on(self.hosts))
+
+    def check(self) -> None:
+        """Refuse before any node starts what a node would refuse at its start (GraphError)."""
+        for spec in self.local_nodes:
+            check_node(spec, self.overrides.get(spec.name))
 
     @property
     def remote_nodes(self) -> tuple[NodeSpec, ...]:
@@ -309,6 +316,36 @@ def _log(text: str) -> None:
     print(f"[rig-launch] {text}", file=sys.stderr, flush=True)
 
 
+def check_node(spec: NodeSpec, extra_overrides: Mapping[str, Any] | None = None) -> None:
+    """What the node would refuse at its start, refused without starting it: its parameters
+    (files, then overrides, as `NodeSpec.ros_arguments` passes them) against their
+    declarations (the module's PARAMETERS), then the module's own ``check_parameters``
+    (e.g. the generator's plan). Raises GraphError with the line the node would print; a
+    module without PARAMETERS (not a rig_runtime node) is left to check itself."""
+    module_name, _, _ = entry_point(spec.package, spec.executable).partition(":")
+    module = importlib.import_module(module_name)
+    declared = getattr(module, "PARAMETERS", None)
+    if declared is None:
+        return
+    overrides = {**spec.parameter_overrides, **(extra_overrides or {})}
+    try:
+        params = resolve_parameters(
+            declared,
+            spec.fq_name,
+            spec.parameters,
+            [(key, yaml_scalar(value)) for key, value in overrides.items()],
+            as_ros_args=True,
+        )
+    except ParameterError as exc:  # as run_node prints it
+        raise GraphError(f"[FATAL] [{spec.name}]: {exc}") from None
+    check = getattr(module, "check_parameters", None)
+    try:
+        if check is not None:
+            check(params)
+    except ValueError as exc:  # as run_node prints what the node's factory raises
+        raise GraphError(f"[FATAL] [{spec.fq_name}]: {exc}") from None
+
+
 def parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
     """``NODE.PARAM:=VALUE`` items (VALUE in YAML) as {node: {param: value}}."""
     import yaml
@@ -350,8 +387,7 @@ def main(argv: list[str] | None = None) -> int:
         launcher = Launcher(
             graph, overrides=parse_overrides(args.overrides), grace_s=args.grace, hosts=args.hosts
         )
-        for spec in launcher.local_nodes:
-            entry_point(spec.package, spec.executable)  # fail before starting anything
+        launcher.check()  # fail before starting anything
     except GraphError as exc:
         _log(f"error: {exc}")
         return 2

@@ -175,6 +175,17 @@ def _node_sections(document: Any, fq_name: str, path: Path) -> list[dict[str, An
     return sections
 
 
+def _file_sections(path: Path, fq_name: str) -> list[dict[str, Any]]:
+    """The parameter file's sections that apply to ``fq_name``, each flattened."""
+    try:
+        document = yaml.load(path.read_text(), Loader=_ParameterFileLoader)
+    except OSError as exc:
+        raise ParameterError(f"cannot read parameter file {path}: {exc}") from exc
+    except yaml.YAMLError as exc:
+        raise ParameterError(f"parameter file {path} is not valid YAML: {exc}") from exc
+    return _node_sections(document, fq_name, path)
+
+
 def _flatten(params: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     # Nested mappings become dotted names, as in rclpy ("limits.max_deg").
     flat: dict[str, Any] = {}
@@ -192,18 +203,31 @@ def resolve_parameters(
     fq_node_name: str,
     param_files: Sequence[str | Path] = (),
     overrides: Sequence[tuple[str, str]] = (),
+    *,
+    as_ros_args: bool = False,
 ) -> ParameterSet:
-    """Defaults, then files in order, then ``-p`` overrides; every value validated."""
+    """Defaults, then files in order, then ``-p`` overrides; every value validated.
+
+    ``as_ros_args``: the values as rcl hands them to the node (files and overrides merged, the
+    later winning), each checked under the name the node gives its source
+    (``--ros-args (NAME:=VALUE)``, Node._declare_parameters), so that an error reads as the
+    node's own line."""
+    if as_ros_args:
+        merged = resolve_parameters(declared, fq_node_name)  # only the declarations
+        given: dict[str, Any] = {}
+        for file in param_files:
+            for section in _file_sections(Path(file), fq_node_name):
+                given.update(section)
+        given.update((name, _parse_override(text)) for name, text in overrides)
+        for name, value in given.items():
+            assign(merged, name, value, f"--ros-args ({name}:={value!r})")
+            if name in merged.sources:
+                merged.sources[name] = "--ros-args"
+        return merged
     result = default_parameters(declared)
     for file in param_files:
         path = Path(file)
-        try:
-            document = yaml.load(path.read_text(), Loader=_ParameterFileLoader)
-        except OSError as exc:
-            raise ParameterError(f"cannot read parameter file {path}: {exc}") from exc
-        except yaml.YAMLError as exc:
-            raise ParameterError(f"parameter file {path} is not valid YAML: {exc}") from exc
-        for section in _node_sections(document, fq_node_name, path):
+        for section in _file_sections(path, fq_node_name):
             for name, value in section.items():
                 assign(result, name, value, f"{path}")
     for name, text in overrides:

@@ -237,8 +237,16 @@ def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for
         reader.start_flow_report(period_s=0.2)
         reader._take_undelivered()  # the first tick: nothing judged yet
         assert got == []
-        time.sleep(0.25)  # the samples are held for longer than a period: what is judged
-        reader._take_undelivered()
+        # What is judged: every sample (all received before now) is held a whole period.
+        aged_ns = time.time_ns() + 200 * MS
+        assert wait_for(lambda: time.time_ns() > aged_ns, 30)
+
+        def judged() -> bool:  # two ticks a period apart at most (a starved pair is retried)
+            reader._take_undelivered()
+            reader._take_undelivered()
+            return bool(got)
+
+        assert wait_for(judged, 30)
         assert got == stamps
         assert (sub.count, sub.stamp_ns, sub.undelivered) == (50, stamps[-1], 50)
         logged = capfd.readouterr().err

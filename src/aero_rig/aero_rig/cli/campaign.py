@@ -117,6 +117,7 @@ def main(args: argparse.Namespace) -> int:
     try:
         launcher = Launcher(graph, overrides=overrides, log_dir=run_dir / "logs", hosts=args.hosts)
         check_campaign_host(launcher)
+        launcher.check()  # the plan and every parameter, before any node starts
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE

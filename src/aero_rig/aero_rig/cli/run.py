@@ -50,6 +50,7 @@ def main(args: argparse.Namespace) -> int:
     overrides = merge_overrides(overrides, parse_overrides(args.overrides))
     try:
         launcher = Launcher(graph, overrides=overrides)
+        launcher.check()  # every parameter, before any node starts
     except (KeyError, GraphError) as exc:
         print(f"aero-rig: {exc}", file=sys.stderr)
         return EXIT_USAGE
