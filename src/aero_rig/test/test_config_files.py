@@ -7,7 +7,9 @@ node name does not match, so that is checked here too), and writable by ROS 2's 
 Every graph must load with rig_runtime.graph.load_graph and name executables that exist.
 """
 
+import contextlib
 import importlib
+import io
 import re
 from pathlib import Path
 from typing import Any
@@ -113,7 +115,14 @@ def test_graph_node_executable_exists(item: tuple[str, NodeSpec]) -> None:
     _graph, spec = item
     target = entry_point(spec.package, spec.executable)  # GraphError if the package lacks it
     module, _, func = target.partition(":")
-    assert callable(getattr(importlib.import_module(module), func))
+    main = getattr(importlib.import_module(module), func)
+    # The node's own --help: what `ros2 run PACKAGE EXECUTABLE --help` prints, with the
+    # parameters this graph's files set.
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["--help"])
+    assert code == 0, out.getvalue()
+    assert all(p.name in out.getvalue() for p in _declared(spec)), out.getvalue()
 
 
 @pytest.mark.parametrize("item", _graph_nodes(), ids=_node_id)
@@ -160,9 +169,11 @@ def test_shared_files_hold_the_node_defaults(item: tuple[str, NodeSpec]) -> None
     """A node default changed in code must not be silently pinned to its old value here."""
     _graph, spec = item
     declared = {p.name: p for p in _declared(spec)}
-    for path in spec.parameters:
-        if path.stem.endswith("_rig"):  # layered per-graph differences
-            continue
+    shared = [p for p in spec.parameters if not p.stem.endswith("_rig")]  # _rig: per-graph
+    assert shared, f"{spec.name} has no shared parameter file"
+    keys = [k for path in shared for k in _sections(path).get(spec.name, {})]
+    assert keys, f"no shared file has a section for {spec.name}: nothing here is checked"
+    for path in shared:
         for key, value in _sections(path).get(spec.name, {}).items():
             if key == "use_sim_time" or (path.name, key) in NOT_DEFAULT:
                 continue
@@ -178,6 +189,8 @@ def test_values_are_typed_for_the_ros2_parameter_parser(item: tuple[str, NodeSpe
     """rcl's YAML parser types values from their spelling and cannot type an empty list."""
     _graph, spec = item
     declared = {p.name: p for p in _declared(spec)}
+    values = [v for path in spec.parameters for v in _sections(path).get(spec.name, {})]
+    assert values, f"no parameter file of {spec.name} sets a value: nothing here is checked"
     for path in spec.parameters:
         for key, value in _sections(path).get(spec.name, {}).items():
             where = f"{path.name}: {key}"

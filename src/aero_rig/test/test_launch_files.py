@@ -7,8 +7,10 @@ OpaqueFunction is run with the launch arguments, and the recorded actions are co
 the graph YAML as rig_runtime.graph.load_graph reads it.
 """
 
+import contextlib
 import importlib
 import importlib.util
+import io
 import re
 import subprocess
 import sys
@@ -236,7 +238,13 @@ def test_launched_executables_are_console_scripts(package: str, executable: str)
     # colcon installs console_scripts to lib/<package>/<name>: what launch_ros Node runs.
     target = entry_point(package, executable)  # GraphError if the package lacks it
     module, _, func = target.partition(":")
-    assert callable(getattr(importlib.import_module(module), func))
+    main = getattr(importlib.import_module(module), func)
+    # It is a node's main: its --help names it and takes the ROS arguments launch_ros passes.
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["--help"])
+    assert code == 0, out.getvalue()
+    assert out.getvalue().startswith(f"usage: {executable} [--ros-args"), out.getvalue()
 
 
 @pytest.mark.usefixtures("ros_stubs")
