@@ -502,6 +502,9 @@ def test_scan_scheduler_runs_the_scan_and_the_bootstrap_or_says_it_cannot_be_rea
         return [{k: v for k, v in row.items() if k != "fit_seconds"} for row in table]
 
     assert timeless(remote.scan.table) == timeless(serial.scan.table)
+    # The B-spline LPV scan's grid ran on the same scheduler: the same rows, the same model.
+    assert remote.lpv_scan is not None and serial.lpv_scan is not None
+    assert timeless(remote.lpv_scan.rows) == timeless(serial.lpv_scan.rows)
     assert remote.errors_all == serial.errors_all
     assert remote.bootstrap is not None and serial.bootstrap is not None
     assert remote.bootstrap.spreads_all == serial.bootstrap.spreads_all
@@ -512,9 +515,10 @@ def test_scan_scheduler_runs_the_scan_and_the_bootstrap_or_says_it_cannot_be_rea
     monkeypatch.setattr(pnlss_training, "SCHEDULER_CONNECT_S", 2.0)
     config = dataclasses.replace(BOOTSTRAP_CONFIG, scan_scheduler=address)
     lost = identify(asm, config, final=True)
-    for what in ("PNLSS structure scan failed", "Table 1 estimation bootstrap failed"):
+    for what in ("PNLSS structure scan failed", "B-spline LPV (all levels) failed",
+                 "Table 1 estimation bootstrap failed"):  # fmt: skip
         assert any(w.startswith(what) for w in lost.warnings), lost.warnings
-    assert lost.scan is None and lost.bootstrap is None
+    assert lost.scan is None and lost.bootstrap is None and lost.lpv_all is None
     assert lost.errors_all and lost.linear_level1 is not None
 
 

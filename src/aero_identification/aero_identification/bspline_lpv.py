@@ -46,6 +46,7 @@ __all__ = [
     "LpvScan",
     "LpvSettings",
     "fit_bspline_lpv",
+    "fit_lpv_candidate",
     "lpv_parameters",
     "scan_bspline_lpv",
 ]
@@ -535,6 +536,38 @@ class LpvScan:
         return "\n".join(lines) + f"\n\n{self.rule}\n"
 
 
+def fit_lpv_candidate(
+    train: PeriodicData,
+    validation: PeriodicData,
+    linear: LinearStateSpace,
+    settings: LpvSettings,
+) -> tuple[dict[str, Any], BSplineLPV | None]:
+    """One grid point of the scan: its row (structure, held-out error and SE by
+    scan.periodic_error, status) and its model (None unless it fitted and stayed bounded); a
+    failed fit is a row with its reason, never a crash. A task for a Dask worker too."""
+    from .scan import periodic_error
+
+    t_fit = time.perf_counter()
+    nx = int(linear.A.shape[0])
+    iv, sd = settings.intervals, settings.state_degree
+    row: dict[str, Any] = {
+        "nx": nx, "intervals": iv, "state_degree": sd, "n_params": lpv_parameters(nx, iv, sd)
+    }  # fmt: skip
+    model: BSplineLPV | None = None
+    try:
+        model = fit_bspline_lpv(train, linear, settings, validation)
+        error, se = periodic_error(model, validation)
+        status = "ok" if math.isfinite(error) else "diverges on the held-out periods"
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        error, se, status = math.inf, math.nan, f"failed: {exc}"
+    row.update(
+        validation_error=error, validation_se=se,
+        training_error=math.inf if model is None else model.history_["training_error"],
+        fit_seconds=time.perf_counter() - t_fit, status=status,
+    )  # fmt: skip
+    return row, (model if status == "ok" else None)
+
+
 def scan_bspline_lpv(
     train: PeriodicData,
     validation: PeriodicData,
@@ -542,44 +575,35 @@ def scan_bspline_lpv(
     intervals: Sequence[int],
     state_degrees: Sequence[int],
     settings: LpvSettings | None = None,
+    client: Any = None,
 ) -> LpvScan:
     """Fit every (intervals, state degree) of the grid from ``linear`` (``settings`` gives the
     rest) and keep one by the one-standard-error rule on ``validation``, each scored by
     scan.periodic_error, the PNLSS scan's error and SE, so both classes' scores compare.
+    ``client``: a Dask client the grid's fits run on (the PNLSS scan's, pnlss_training.
+    fit_client), the data scattered once; None: one after another in this process (a local
+    cluster's start-up costs more than the grid's few fits).
 
     Raises:
         ValueError: an empty grid, or no candidate that fitted and stayed bounded.
     """
-    from .scan import one_standard_error, periodic_error
+    from .scan import one_standard_error
 
     base = settings or LpvSettings()
     grid = [(iv, sd) for iv in dict.fromkeys(intervals) for sd in dict.fromkeys(state_degrees)]
     if not grid:
         raise ValueError("the B-spline LPV scan's grid is empty")
     t0 = time.perf_counter()
-    rows: list[dict[str, Any]] = []
-    models: list[BSplineLPV | None] = []
-    for iv, sd in grid:
-        t_fit = time.perf_counter()
-        nx = int(linear.A.shape[0])
-        row: dict[str, Any] = {
-            "nx": nx, "intervals": iv, "state_degree": sd, "n_params": lpv_parameters(nx, iv, sd)
-        }  # fmt: skip
-        model: BSplineLPV | None = None
-        try:
-            model = fit_bspline_lpv(train, linear, replace(base, intervals=iv, state_degree=sd),
-                                    validation)  # fmt: skip
-            error, se = periodic_error(model, validation)
-            status = "ok" if math.isfinite(error) else "diverges on the held-out periods"
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            error, se, status = math.inf, math.nan, f"failed: {exc}"
-        row.update(
-            validation_error=error, validation_se=se,
-            training_error=math.inf if model is None else model.history_["training_error"],
-            fit_seconds=time.perf_counter() - t_fit, status=status,
-        )  # fmt: skip
-        rows.append(row)
-        models.append(model if status == "ok" else None)
+    each = [replace(base, intervals=iv, state_degree=sd) for iv, sd in grid]
+    if client is None:
+        fits = [fit_lpv_candidate(train, validation, linear, st) for st in each]
+    else:
+        train_f, val_f = client.scatter([train, validation], broadcast=True)
+        futures = [client.submit(fit_lpv_candidate, train_f, val_f, linear, st, pure=False)
+                   for st in each]  # fmt: skip
+        fits = [f.result() for f in futures]
+    rows = [row for row, _ in fits]
+    models = [model for _, model in fits]
     scores = {
         i: (r["validation_error"], r["validation_se"], r["n_params"])
         for i, r in enumerate(rows)

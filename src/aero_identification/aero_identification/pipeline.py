@@ -68,6 +68,7 @@ from .level_models import level_models
 from .pnlss import one_blas_thread
 from .pnlss_training import (
     MAX_JACOBIAN_BYTES,
+    fit_client,
     fit_levels,
     jacobian_bytes,
     level_signature,
@@ -189,7 +190,7 @@ def _identify(
                                   say)  # fmt: skip
             # 3b. The second model class on the same sets, and the selected model.
             if config.lpv and sets is not None:
-                _fit_lpv_models(result, sets, config, final_models, say)
+                _fit_lpv_models(result, sets, config, final_models, client, say)
             result.selection = select_model(result, sets) if sets is not None else {}
             # 3c. The semi-empirical baseline, from the quasi-static sweep and the same sets.
             if config.semi_empirical:
@@ -290,10 +291,12 @@ def _fit_lpv_models(
     sets: EstimationSets,
     config: IdentificationConfig,
     final_models: bool,
+    client: Any,
     say: Log,
 ) -> None:
     """The B-spline LPV model (bspline_lpv.py) on the estimation sets, from the PNLSS's linear
-    model; scanned over its grid for the final models (``config.scan``)."""
+    model; scanned over its grid for the final models (``config.scan``), on the PNLSS scan's
+    Dask client when there is one (``client``, ``config.scan_scheduler``)."""
     lin = result.linear_level1
     if lin is None:
         return
@@ -321,14 +324,15 @@ def _fit_lpv_models(
     )  # fmt: skip
     try:
         if final_models and config.scan and held is not None:
-            result.lpv_scan = scan_bspline_lpv(
-                train, held, lin, config.lpv_scan_intervals, config.lpv_scan_state_degrees,
-                settings,
-            )  # fmt: skip
+            with fit_client(config, client) as executor:
+                result.lpv_scan = scan_bspline_lpv(
+                    train, held, lin, config.lpv_scan_intervals, config.lpv_scan_state_degrees,
+                    settings, client=executor,
+                )  # fmt: skip
             result.lpv_all = result.lpv_scan.best
         else:
             result.lpv_all = fit_bspline_lpv(train, lin, settings, held)
-    except (ValueError, np.linalg.LinAlgError) as exc:
+    except (ValueError, np.linalg.LinAlgError, OSError) as exc:  # OSError: no scheduler
         result.warnings.append(f"B-spline LPV (all levels) failed: {exc}")
         return
     result.timings_s["lpv"] = time.perf_counter() - t0

@@ -131,6 +131,28 @@ def test_the_scan_keeps_the_simplest_adequate_structure() -> None:
     assert "| kept |" in scan.to_markdown()
 
 
+def test_the_scan_on_a_dask_client_gives_the_serial_scan() -> None:
+    """The grid's fits as Dask tasks (the PNLSS scan's client): the same rows and kept model."""
+    from dask.distributed import Client, LocalCluster
+
+    rng = np.random.default_rng(5)
+    offsets = [6.0, 15.0]
+    train, held = truth_records(rng, offsets, 0.005), truth_records(rng, offsets, 0.005)
+    settings = LpvSettings(max_iter=10)
+    serial = scan_bspline_lpv(train, held, linear_of(train), (2, 4), (1,), settings)
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                     dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):  # fmt: skip
+        remote = scan_bspline_lpv(train, held, linear_of(train), (2, 4), (1,), settings,
+                                  client=client)  # fmt: skip
+    key = ("intervals", "state_degree", "n_params", "validation_error", "status")
+    assert [[r[k] for k in key] for r in remote.rows] == [[r[k] for k in key] for r in serial.rows]
+    assert remote.best_index == serial.best_index
+    np.testing.assert_array_equal(remote.best.theta, serial.best.theta)
+
+
 def test_settings_refuse_what_cannot_be_fitted() -> None:
     with pytest.raises(ValueError, match="intervals"):
         LpvSettings(intervals=0)
