@@ -2,11 +2,12 @@
 command generator node."""
 
 from multisine_gen.campaigns import build_plan, default_plan, short_plan
-from multisine_gen.crest import crest_factor, reduce_crest_factor
+from multisine_gen.crest import reduce_crest_factor
 from multisine_gen.multisine import (
     ExcitationError,
     LineGrid,
     Multisine,
+    crest_factor,
     design_line_grid,
     odd_random_phase_multisine,
     random_phase_multisine,

@@ -13,19 +13,7 @@ import numpy as np
 
 from multisine_gen.multisine import ExcitationError, Multisine
 
-__all__ = ["crest_factor", "reduce_crest_factor"]
-
-
-def crest_factor(signal: np.ndarray) -> float:
-    """max |x − mean| / std of a (n,) signal (a period, or a whole record)."""
-    x = np.asarray(signal, dtype=float)
-    if x.ndim != 1 or x.size < 2:
-        raise ExcitationError(f"crest_factor needs a 1-D signal of >= 2 samples, got {x.shape}")
-    centred = x - x.mean()
-    std = float(np.sqrt(np.mean(centred**2)))
-    if std == 0.0:
-        raise ExcitationError("crest_factor of a constant signal is undefined")
-    return float(np.max(np.abs(centred)) / std)
+__all__ = ["reduce_crest_factor"]
 
 
 def reduce_crest_factor(

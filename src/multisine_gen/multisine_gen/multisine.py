@@ -53,6 +53,18 @@ def _check_rate_and_length(fs: float, N: int) -> None:
         raise ExcitationError(f"samples per period N must be an integer >= 4, got {N!r}")
 
 
+def crest_factor(signal: np.ndarray) -> float:
+    """max |x − mean| / std of a (n,) signal (a period, or a whole record) [Pintelon2012 §3.2]."""
+    x = np.asarray(signal, dtype=float)
+    if x.ndim != 1 or x.size < 2:
+        raise ExcitationError(f"crest_factor needs a 1-D signal of >= 2 samples, got {x.shape}")
+    centred = x - x.mean()
+    std = float(np.sqrt(np.mean(centred**2)))
+    if std == 0.0:
+        raise ExcitationError("crest_factor of a constant signal is undefined")
+    return float(np.max(np.abs(centred)) / std)
+
+
 @dataclass(frozen=True, eq=False)
 class LineGrid:
     """Which DFT bins of an N-sample period at fs are excited, and which are left out.
@@ -241,9 +253,8 @@ class Multisine:
         return self.offset_deg + np.fft.irfft(self.spectrum(), n=self.N)
 
     def crest_factor(self) -> float:
-        """max |u − offset| / std of one period (P&S 2012 §3.2)."""
-        x = self.period() - self.offset_deg
-        return float(np.max(np.abs(x)) / self.std_deg)
+        """`crest_factor` of one period (P&S 2012 §3.2)."""
+        return crest_factor(self.period())
 
     def with_phases(self, phases: np.ndarray, seed: int | None = None) -> "Multisine":
         """Same lines, amplitudes, offset and std with other phases (F,) [rad]."""

@@ -17,7 +17,7 @@ from typing import Literal
 
 import numpy as np
 
-from multisine_gen.multisine import ExcitationError
+from multisine_gen.multisine import ExcitationError, crest_factor
 
 __all__ = ["Sine", "design_sine"]
 
@@ -77,9 +77,8 @@ class Sine:
         return np.tile(self.period(), periods)
 
     def crest_factor(self) -> float:
-        """max |u − offset| / std of a sampled period (√2 when a sample hits the peak)."""
-        x = self.period() - self.offset_deg
-        return float(np.max(np.abs(x)) / np.sqrt(np.mean(x**2)))
+        """`multisine.crest_factor` of a sampled period (√2 when a sample hits the peak)."""
+        return crest_factor(self.period())
 
 
 def design_sine(

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from multisine_gen.crest import crest_factor, reduce_crest_factor
-from multisine_gen.multisine import ExcitationError, odd_random_phase_multisine
+from multisine_gen.crest import reduce_crest_factor
+from multisine_gen.multisine import ExcitationError, crest_factor, odd_random_phase_multisine
 from multisine_gen.sine import design_sine
 
 

@@ -15,7 +15,6 @@ intent — the heartbeat proves that the commanding process is alive.
 
 import math
 import secrets
-import select
 import socket
 import sys
 import threading
@@ -38,6 +37,7 @@ from pitch_actuator.controller_protocol import (
     pack,
     unpack,
 )
+from rig_runtime.datagram import drain_datagrams, receive_datagrams
 
 FeedbackCallback = Callable[[Feedback], None]
 
@@ -285,28 +285,15 @@ class ControllerLink:
         return self._latest
 
     def _run(self) -> None:
-        while not self._stop_event.is_set():
-            wait = max(0.0, self.config.heartbeat_period_s - (time.monotonic() - self._last_sent))
-            try:
-                readable, _, _ = select.select([self._sock], [], [], min(wait, 0.05))
-            except (OSError, ValueError):  # socket closed under us during close()
-                return
-            self._heartbeat_if_due()
-            if readable:
-                self._drain_socket()
+        receive_datagrams(
+            self._sock, self._stop_event, self._handle_datagram, 2048,
+            wait_s=lambda: min(0.05, max(0.0, self.config.heartbeat_period_s
+                                         - (time.monotonic() - self._last_sent))),
+            tick=self._heartbeat_if_due,
+        )  # fmt: skip
 
     def _drain_socket(self) -> None:
-        while True:
-            try:
-                data, addr = self._sock.recvfrom(2048)
-            except (BlockingIOError, InterruptedError):
-                return
-            except ConnectionRefusedError:
-                # ICMP port unreachable from an earlier send: the controller is not up (yet).
-                continue
-            except OSError:
-                return
-            self._handle_datagram(data, addr)
+        drain_datagrams(self._sock, self._handle_datagram, 2048)
 
     def _handle_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
         received_ns = time.monotonic_ns()

@@ -27,7 +27,6 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from enum import Enum
-from types import FrameType
 from typing import Protocol, TextIO
 
 from pitch_actuator.controller_protocol import (
@@ -42,6 +41,7 @@ from pitch_actuator.controller_protocol import (
     pack,
     unpack,
 )
+from rig_runtime.signals import StopSignals
 
 
 class _Sample(Protocol):
@@ -308,14 +308,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sock.setblocking(False)
     print(sock.getsockname()[1], flush=True)
 
-    running = True
-
-    def _terminate(signum: int, frame: FrameType | None) -> None:
-        nonlocal running
-        running = False
-
-    signal.signal(signal.SIGTERM, _terminate)
-    signal.signal(signal.SIGINT, _terminate)
+    stop = StopSignals(signal.SIGTERM, signal.SIGINT).install()  # for the process's life
 
     audit = open(args.audit_file, "a", encoding="utf-8") if args.audit_file else None
     core = ControllerCore(config, model, audit)
@@ -324,7 +317,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = next_tick = time.monotonic()
     overruns = 0
     try:
-        while running:
+        while not stop:
             now = time.monotonic()
             if args.duration > 0 and now - start >= args.duration:
                 break

@@ -62,8 +62,11 @@ def hold_setpoint(
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         seq = link.send_setpoint(math.radians(setpoint_deg))
-        # one control period, or until the controller echoes it
-        wait_until(lambda s=seq: received and received[-1].applied_seq >= s, 0.005, poll_s=0.001)
+
+        def echoed(s: int = seq) -> bool:
+            return bool(received) and received[-1].applied_seq >= s
+
+        wait_until(echoed, 0.005, poll_s=0.001)  # one control period, or until it is echoed
         last = received[-1] if received else None
         if last is not None and last.applied_seq == seq and reached(last):
             return last

@@ -18,7 +18,6 @@ link it never blocks its caller: use :meth:`ScannerClient.poll` from a timer, or
 """
 
 import math
-import select
 import socket
 import sys
 import threading
@@ -41,6 +40,7 @@ from pressure_scanner.scanner_protocol import (
     ScannerStatus,
     unpack_frame,
 )
+from rig_runtime.datagram import drain_datagrams, receive_datagrams
 
 # A ±10 inH2O module (the usual range for low-speed wind-tunnel pressure taps).
 DEFAULT_FULL_SCALE_PA = 10 * 249.08891
@@ -281,29 +281,19 @@ class ScannerClient:
         self._thread.start()
 
     def _run(self) -> None:
-        while not self._stop_event.is_set():
-            try:
-                readable, _, _ = select.select([self._sock], [], [], 0.05)
-            except (OSError, ValueError):  # socket closed during close()
-                return
-            if readable:
-                self._drain_socket()
+        receive_datagrams(self._sock, self._stop_event, self._on_datagram, 65536)
 
     def _drain_socket(self) -> None:
-        while True:
+        drain_datagrams(self._sock, self._on_datagram, 65536)
+
+    def _on_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
+        delivered = self._handle_datagram(data, addr)
+        if delivered is not None and self._callback is not None:
             try:
-                data, addr = self._sock.recvfrom(65536)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError:
-                return
-            delivered = self._handle_datagram(data, addr)
-            if delivered is not None and self._callback is not None:
-                try:
-                    self._callback(delivered)
-                except Exception as exc:  # a consumer bug must not stop reception
-                    self._counts["callback"] += 1
-                    print(f"scanner_client: frame callback raised {exc!r}", file=sys.stderr)
+                self._callback(delivered)
+            except Exception as exc:  # a consumer bug must not stop reception
+                self._counts["callback"] += 1
+                print(f"scanner_client: frame callback raised {exc!r}", file=sys.stderr)
 
     def _reject(self, reason: str) -> None:
         self._counts["invalid"] += 1

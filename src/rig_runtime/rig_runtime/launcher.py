@@ -41,6 +41,7 @@ from .ros_environment import (
     RosEnvironmentError,
     require_rclpy,
 )
+from .signals import StopSignals
 
 
 @dataclass
@@ -258,13 +259,8 @@ class Launcher:
 
     def run(self, duration_s: float | None = None) -> int:
         """Start, wait for a stop reason (node exit, duration, signal), stop. Exit code."""
-        stop_reason: list[str] = []
-
-        def _on_signal(signum: int, _frame: Any) -> None:
-            stop_reason.append(signal.Signals(signum).name)
-
-        handled = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # SIGHUP: the terminal closed
-        previous = {s: signal.signal(s, _on_signal) for s in handled}
+        # SIGHUP: the terminal closed.
+        stop_reason = StopSignals(signal.SIGINT, signal.SIGTERM, signal.SIGHUP).install()
         try:
             self.start()
             deadline = None if duration_s is None else time.monotonic() + duration_s
@@ -280,12 +276,11 @@ class Launcher:
                 if deadline is not None and time.monotonic() >= deadline:
                     reason = f"duration {duration_s:g} s reached"
                 time.sleep(0.05)
-            reason = reason or f"received {stop_reason[0]}"
+            reason = reason or f"received {stop_reason.received[0]}"
             _log(f"stopping graph {self.graph.name!r}: {reason}")
         finally:
             codes = self.stop()
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
+            stop_reason.restore()
         if self.failure:
             _log(f"error: {self.failure}")
             return 1

@@ -56,6 +56,7 @@ from .params import Parameter, ParameterError, ParameterSet, assign, default_par
 from .participant_profile import participant_environment
 from .qos import QosProfile, resolve_qos, to_rclpy_qos
 from .ros_environment import LAUNCHER_PID_ENV, ArgumentError
+from .signals import StopSignals
 
 try:
     import rclpy
@@ -936,16 +937,16 @@ def run_node(
         print(f"[FATAL] [{name}]: {exc}", file=sys.stderr)
         return EXIT_CONFIG_ERROR
 
-    signalled: list[int] = []
-
-    def _stop(signum: int, _frame: Any) -> None:
-        if signalled:  # a terminal's Ctrl-C and ros2 launch both send SIGINT: one stop
+    def _stop(name: str) -> None:
+        if len(signalled.received) > 1:  # a terminal's Ctrl-C and ros2 launch's SIGINT: one
             return
-        signalled.append(signum)
-        node.logger.info("received %s, shutting down", signal.Signals(signum).name)
+        node.logger.info("received %s, shutting down", name)
         node._signal_shutdown()
 
-    previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    # Stopped by a signal, the process is on its way out: a second SIGINT (Ctrl-C in the
+    # terminal's process group, then ros2 launch's own) must not kill it after the stop.
+    signalled = StopSignals(signal.SIGINT, signal.SIGTERM, on_signal=_stop, ignore_after=True)
+    signalled.install()
     try:
         try:
             instance = factory(node)
@@ -974,8 +975,5 @@ def run_node(
         node.exit_code = node.exit_code or 1
     finally:
         node.close()
-        for sig, handler in previous.items():
-            # Stopped by a signal, the process is on its way out: a second SIGINT (Ctrl-C in
-            # the terminal's process group, then ros2 launch's own) must not kill it now.
-            signal.signal(sig, signal.SIG_IGN if signalled else handler)
+        signalled.restore()
     return node.exit_code

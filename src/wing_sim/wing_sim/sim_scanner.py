@@ -29,7 +29,6 @@ import socket
 import sys
 import time
 from collections.abc import Sequence
-from types import FrameType
 
 import numpy as np
 
@@ -41,6 +40,7 @@ from pressure_scanner.scanner_protocol import (
     Units,
     pack_frame,
 )
+from rig_runtime.signals import StopSignals
 
 
 def zero_offsets_pa(n_channels: int, amplitude_pa: float, seed: int) -> np.ndarray:
@@ -139,14 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(sock.getsockname()[1], flush=True)
     dest = (args.host, args.port)
 
-    running = True
-
-    def _terminate(signum: int, frame: FrameType | None) -> None:
-        nonlocal running
-        running = False
-
-    signal.signal(signal.SIGTERM, _terminate)
-    signal.signal(signal.SIGINT, _terminate)
+    stop = StopSignals(signal.SIGTERM, signal.SIGINT).install()  # for the process's life
 
     def send(datagram: bytes) -> None:
         try:
@@ -161,7 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sent = 0
     k = 0
     try:
-        while running and (args.frames == 0 or k < args.frames):
+        while not stop and (args.frames == 0 or k < args.frames):
             counter = (args.start_counter + k) % (1 << 32)
             # Compute frame k before its send time, so a slow first plant step (imports,
             # caches) delays the start of the stream instead of putting it behind schedule.

@@ -22,6 +22,7 @@ from rig_runtime import ros_environment
 from rig_runtime.flow import FlowWatch
 from rig_runtime.graph import GraphError, load_graph, yaml_scalar
 from rig_runtime.launcher import Launcher, parse_overrides
+from rig_runtime.signals import StopSignals
 
 from ..recovery import recover_from_bag, recover_from_whole_bag, samples_missed
 from ..verdict import run_problems
@@ -251,17 +252,12 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
     stalled: str | None = None
     flow_at_stall: dict[str, Any] | None = None
     started, started_epoch = time.monotonic(), time.time()
-    stopped_by: list[str] = []
-
-    def _on_signal(signum: int, _frame: Any) -> None:
-        # kill, a job scheduler's time limit or a closed terminal: stop the graph as Ctrl-C does
-        # (the nodes are in their own process groups and would otherwise run on). Only noted
-        # here: the loop below sees it within one spin. An exception raised from the handler
-        # could surface anywhere, also outside the try below (CI once saw the campaign die
-        # of an uncaught KeyboardInterrupt, exit -2, on SIGTERM).
-        stopped_by.append(signal.Signals(signum).name)
-
-    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGHUP)}
+    # kill, a job scheduler's time limit or a closed terminal: stop the graph as Ctrl-C does
+    # (the nodes are in their own process groups and would otherwise run on). Only noted: the
+    # loop below sees it within one spin (an exception raised from a handler could surface
+    # anywhere, also outside the try below: CI once saw the campaign die of an uncaught
+    # KeyboardInterrupt, exit -2, on SIGTERM).
+    stopped_by = StopSignals(signal.SIGTERM, signal.SIGHUP).install()
     launcher.start()
     reason: str | None = None
     checked, stopped = 0.0, {}
@@ -295,17 +291,16 @@ def launch_and_monitor(launcher: Launcher, *, timeout: float, quiet: bool) -> Ou
         reason = "interrupted"
         launcher.failure = "interrupted by the user"
     finally:
-        previous[signal.SIGINT] = signal.getsignal(signal.SIGINT)
-        for sig in previous:  # the graph is being stopped (bounded): let that finish
-            signal.signal(sig, signal.SIG_IGN)
+        sigint = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        stopped_by.ignore()  # the graph is being stopped (bounded): let that finish
         progress.close()
         monitor.close()
         codes = launcher.stop()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        stopped_by.restore()
+        signal.signal(signal.SIGINT, sigint)
     if stopped_by:  # SIGTERM or SIGHUP, also one that came as the run ended by itself
         reason = "interrupted"
-        launcher.failure = f"stopped by {stopped_by[0]}"
+        launcher.failure = f"stopped by {stopped_by.received[0]}"
     return Outcome(
         reason,
         codes,
