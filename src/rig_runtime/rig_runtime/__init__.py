@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # what __getattr__ loads, for the type checker
     from .messages import new_message, set_stamp, stamp_to_ns
-    from .node import Node, run_node
+    from .node import Node
+    from .node_main import run_node
     from .params import Parameter, ParameterError
     from .qos import PROFILES, QosProfile
 
@@ -22,7 +23,7 @@ _EXPORTS = {
     "PROFILES": "qos",
     "QosProfile": "qos",
     "Node": "node",
-    "run_node": "node",
+    "run_node": "node_main",
     "Parameter": "params",
     "ParameterError": "params",
     "new_message": "messages",

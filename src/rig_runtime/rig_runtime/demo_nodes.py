@@ -16,7 +16,8 @@ import numpy as np
 
 from .interface import PITCH_JOINT
 from .messages import set_stamp
-from .node import Node, run_node
+from .node import Node
+from .node_main import run_node
 from .params import Parameter
 
 COMMON = [

@@ -209,9 +209,9 @@ def resolve_parameters(
     """Defaults, then files in order, then ``-p`` overrides; every value validated.
 
     ``as_ros_args``: the values as rcl hands them to the node (files and overrides merged, the
-    later winning), each checked under the name the node gives its source
-    (``--ros-args (NAME:=VALUE)``, Node._declare_parameters), so that an error reads as the
-    node's own line."""
+    later winning), each checked under the name the node gives its source (``--ros-args
+    (NAME:=VALUE)``, node_parameters.declare_parameters), so that an error reads as the node's
+    own line."""
     if as_ros_args:
         merged = resolve_parameters(declared, fq_node_name)  # only the declarations
         given: dict[str, Any] = {}
@@ -260,3 +260,48 @@ def assign(result: ParameterSet, name: str, value: Any, source: str) -> None:
         )
     result.values[name] = result.declared[name].validate(value, source)
     result.sources[name] = source
+
+
+def ros_descriptor(p: "Parameter") -> Any:
+    """An rcl_interfaces ParameterDescriptor from a declaration (type, description, range);
+    rcl_interfaces is imported only here (this module is light)."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    descriptor = ParameterDescriptor(
+        name=p.name,
+        type=ros_parameter_type(p),
+        description=p.description,
+        additional_constraints=p.describe_range(),
+        read_only=p.read_only,
+    )
+    if p.min is not None or p.max is not None:
+        if p.value_type is float:
+            lo = -float("inf") if p.min is None else float(p.min)
+            hi = float("inf") if p.max is None else float(p.max)
+            descriptor.floating_point_range = [
+                FloatingPointRange(from_value=lo, to_value=hi, step=0.0)
+            ]
+        elif p.value_type is int:
+            lo_i = -(2**63) if p.min is None else int(p.min)
+            hi_i = 2**63 - 1 if p.max is None else int(p.max)
+            descriptor.integer_range = [IntegerRange(from_value=lo_i, to_value=hi_i, step=0)]
+    return descriptor
+
+
+def ros_parameter_type(p: "Parameter") -> int:
+    """The rcl_interfaces ParameterType of a declaration."""
+    from rcl_interfaces.msg import ParameterType
+
+    scalar = {
+        bool: ParameterType.PARAMETER_BOOL,
+        int: ParameterType.PARAMETER_INTEGER,
+        float: ParameterType.PARAMETER_DOUBLE,
+        str: ParameterType.PARAMETER_STRING,
+    }
+    arrays = {
+        bool: ParameterType.PARAMETER_BOOL_ARRAY,
+        int: ParameterType.PARAMETER_INTEGER_ARRAY,
+        float: ParameterType.PARAMETER_DOUBLE_ARRAY,
+        str: ParameterType.PARAMETER_STRING_ARRAY,
+    }
+    return int((arrays if p.is_list else scalar)[p.value_type])

@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from .bag import COMPRESSIONS, BagWriter
-from .node import Node, run_node
+from .node import Node
+from .node_main import run_node
 from .params import Parameter
 from .qos import QosProfile
 

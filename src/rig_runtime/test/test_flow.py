@@ -235,15 +235,15 @@ def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for
         assert pub.handle.wait_for_all_acked(Duration(seconds=30))
         # the reader's executor is never spun: only the flow report's take can deliver
         reader.start_flow_report(period_s=0.2)
-        reader._take_undelivered()  # the first tick: nothing judged yet
+        reader.flow_report.take_undelivered()  # the first tick: nothing judged yet
         assert got == []
         # What is judged: every sample (all received before now) is held a whole period.
         aged_ns = time.time_ns() + 200 * MS
         assert wait_for(lambda: time.time_ns() > aged_ns, 30)
 
         def judged() -> bool:  # two ticks a period apart at most (a starved pair is retried)
-            reader._take_undelivered()
-            reader._take_undelivered()
+            reader.flow_report.take_undelivered()
+            reader.flow_report.take_undelivered()
             return bool(got)
 
         assert wait_for(judged, 30)
@@ -257,8 +257,8 @@ def test_a_node_counts_its_streams_and_takes_what_its_executor_was_not_woken_for
             set_stamp(msg.header.stamp, stamp + 1_000 * MS)
             pub.publish(msg)
         assert wait_for(lambda: (reader.spin_once(0.05), len(got) == 55)[1], 30), len(got)
-        reader._take_undelivered()
-        reader._take_undelivered()
+        reader.flow_report.take_undelivered()
+        reader.flow_report.take_undelivered()
         assert sub.undelivered == 50 and len(got) == 55
         assert "held undelivered" not in capfd.readouterr().err
     finally:

@@ -42,7 +42,7 @@ def test_spin_returns_after_the_callback_that_requests_shutdown(node: Node) -> N
 
 def test_a_flag_set_by_a_signal_handler_ends_spin(node: Node) -> None:
     # What run_node's SIGINT/SIGTERM handler calls: only the flag, read between turns.
-    assert _ticks_until_stopped(node, node._signal_shutdown) >= 5
+    assert _ticks_until_stopped(node, node.spinner.signal_shutdown) >= 5
 
 
 def test_a_signal_ends_spin_while_samples_keep_coming(node: Node) -> None:
@@ -61,7 +61,7 @@ def test_a_signal_ends_spin_while_samples_keep_coming(node: Node) -> None:
     def on_sample(_msg: object) -> None:
         taken[0] += 1
         if taken[0] == 5:
-            node._signal_shutdown(3)
+            node.spinner.signal_shutdown(3)
         publish()
         publish()
 
@@ -74,7 +74,7 @@ def test_a_signal_ends_spin_while_samples_keep_coming(node: Node) -> None:
     def rescue() -> None:
         if not rescued.wait(30.0):
             rescued.set()
-            node._end_turn()
+            node.spinner._end_turn()
 
     guard = threading.Thread(target=rescue, daemon=True)
     guard.start()
