@@ -8,7 +8,7 @@ BIN    := $(VENV)/bin
 export ROS_WHEELS_EXIST := import platform, sys; sys.exit(0 if platform.system() == "Linux" and platform.machine() == "x86_64" and (3, 10) <= sys.version_info[:2] <= (3, 13) else 1)
 export PLATFORM := import platform, sys; print(platform.machine(), "Python", platform.python_version())
 STAMP  := $(VENV)/.installed
-PACKAGES := rig_runtime multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
+PACKAGES := rig_runtime rig_testing multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
 PKG_FILES := $(foreach p,$(PACKAGES),src/$(p)/setup.py src/$(p)/package.xml)
 
 .PHONY: test test-fast campaign lint format typecheck bench venv clean

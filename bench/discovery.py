@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rig_runtime.testing import graph_env, unique_domain_id
+from rig_testing.processes import graph_env, unique_domain_id
 
 TOPIC = "/bench_discovery"
 MATCH_TIMEOUT_S = 30.0

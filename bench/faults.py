@@ -66,7 +66,7 @@ from rig_runtime.interface import EXPERIMENT_PLAN
 from rig_runtime.launcher import Launcher, node_command
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
-from rig_runtime.testing import (
+from rig_testing.processes import (
     BusyProcesses,
     finish,
     graph_env,

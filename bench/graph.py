@@ -56,7 +56,7 @@ from rig_runtime.graph import load_graph
 from rig_runtime.interface import PITCH_COMMAND, WING_COEFFICIENTS
 from rig_runtime.launcher import Launcher
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.testing import graph_env, join_graph, unique_domain_id
+from rig_testing.processes import graph_env, join_graph, unique_domain_id
 
 
 def _sample_processes(

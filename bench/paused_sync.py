@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from graph_support import CAMPAIGN_NODES, campaign_paused_in_turn, small_plan_design
 
 from multisine_gen.plan_format import plan_to_json
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 
 def paused_run(plan: Path, run: Path) -> tuple[int, float, list[str], str]:

@@ -34,7 +34,7 @@ import psutil
 
 from rig_runtime.interface import PITCH_COMMAND, PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
 from rig_runtime.messages import new_message, serialize
-from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
+from rig_testing.processes import Processes, graph_env, join_graph, wait_for
 
 TOPICS = (PITCH_COMMAND, PITCH_STATE, WING_COEFFICIENTS, PRESSURE_TAPS)
 CAMPAIGN_EXPERIMENT_S = 2442.0  # the default plan: 488,449 samples at 200 Hz

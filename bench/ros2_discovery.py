@@ -29,7 +29,7 @@ from typing import Any
 from aero_rig.cli.common import config_path
 from rig_runtime.graph import load_graph
 from rig_runtime.launcher import Launcher
-from rig_runtime.testing import graph_env, unique_domain_id
+from rig_testing.processes import graph_env, unique_domain_id
 
 ROS2 = Path(sys.executable).parent / "ros2"
 NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]

@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from rig_runtime.demo_nodes import make_message
 from rig_runtime.messages import serialize
 from rig_runtime.node import Node, message_class
 from rig_runtime.qos import PROFILES, to_rclpy_qos
-from rig_runtime.testing import graph_env, join_graph, unique_domain_id
+from rig_testing.demo_nodes import make_message
+from rig_testing.processes import graph_env, join_graph, unique_domain_id
 
 CLOUD = "sensor_msgs/msg/PointCloud2"
 RESULT = "std_msgs/msg/String"

@@ -1,6 +1,6 @@
 """The campaign on two hosts against one machine, and each link fault's time to its diagnosis.
 
-Builds a lab of hosts inside this machine (rig_runtime.netlab: network namespaces on one
+Builds a lab of hosts inside this machine (rig_testing.netlab: network namespaces on one
 switch; needs root) and runs the simulated campaign of one plan and seed per case:
 
 - ``one_host``: `aero-rig campaign` with every node on this machine (the reference);
@@ -44,7 +44,7 @@ from graph_support import (
 from multisine_gen.plan_format import plan_to_json
 from rig_runtime import netlab
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 CASES = ("one_host", "two_hosts", "static_peers", "pulled_3s", "pulled_past_lease")
 

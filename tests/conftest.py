@@ -12,7 +12,7 @@ import pytest
 from graph_support import WING, small_plan_design
 
 from multisine_gen.plan_format import plan_to_json
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 HERE = Path(__file__).resolve().parent
 

@@ -23,9 +23,9 @@ from rig_runtime.barrier import ReadinessReport
 from rig_runtime.graph import package_share
 from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY, PITCH_COMMAND
 from rig_runtime.messages import stamp_to_ns
-from rig_runtime.netlab import NetLab
 from rig_runtime.node import CdrSubscription, Node
-from rig_runtime.testing import finish, node_process, pause, start_session, wait_for
+from rig_testing.netlab import NetLab
+from rig_testing.processes import finish, node_process, pause, start_session, wait_for
 
 
 class Observer:
@@ -190,7 +190,7 @@ def campaign_paused_in_turn(
 # high-offset periods repeat, so Table 1 is testable on the short and small plans.
 WING = ("-p", "sim_wing.preset:=repeatable_stall")
 
-# -- the graph on two hosts (rig_runtime.netlab) ------------------------------------------------
+# -- the graph on two hosts (rig_testing.netlab) ------------------------------------------------
 RIG, WORKSTATION, TOOLS = "rig", "workstation", "tools"
 LAB_HOSTS = [RIG, WORKSTATION, TOOLS]  # TOOLS: a third machine for the ros2 command
 

@@ -34,7 +34,7 @@ from rig_runtime.interface import (
 )
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
-from rig_runtime.testing import (
+from rig_testing.processes import (
     BusyProcesses,
     descendants,
     finish,

@@ -11,6 +11,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = [
     "rig_runtime",
+    "rig_testing",
     "multisine_gen",
     "pitch_actuator",
     "pressure_scanner",

@@ -29,7 +29,7 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
 )
 from rig_runtime.launcher import Launcher, node_command
-from rig_runtime.testing import (
+from rig_testing.processes import (
     finish,
     graph_env,
     join_graph,
@@ -228,12 +228,14 @@ def test_a_free_running_actuator_is_reported_excluded_and_fails_the_campaign(
 
 
 def test_a_node_failing_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:
-    bad = tmp_path / "plan.json"
-    bad.write_text("{}")
-    proc = _campaign("--plan", str(bad), "--out", str(tmp_path / "run"), env=graph_env())
+    """What only the node finds at its start (a tap layout file that is not there; the
+    declarations and the plan are checked before: test_refused_before_start.py)."""
+    missing = tmp_path / "no_taps.yaml"
+    proc = _campaign("-p", f"lift.taps_file:={missing}", "--out", str(tmp_path / "run"),
+                     env=graph_env())  # fmt: skip
     _, err = finish(proc, 120)
     assert proc.returncode == 1
     assert (
-        "campaign failed: node 'generator' exited with code 2: [FATAL] [/generator]: "
-        "not an experiment plan"
+        "campaign failed: node 'lift' exited with code 2: [FATAL] [/lift]: "
+        f"cannot read tap layout {missing}"
     ) in err, err

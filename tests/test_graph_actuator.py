@@ -8,7 +8,7 @@ from graph_support import Observer, PeerReaders, small_plan_design
 
 from pitch_actuator.dynamics import ActuatorModel
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, PITCH_COMMAND, PITCH_STATE
-from rig_runtime.testing import Processes, graph_env, join_graph
+from rig_testing.processes import Processes, graph_env, join_graph
 
 TOPICS = {
     PITCH_COMMAND.name: ("sensor_msgs/msg/JointState", "stream"),

@@ -28,7 +28,7 @@ from rig_runtime.interface import (
 )
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
+from rig_testing.processes import Processes, graph_env, join_graph, wait_for
 
 FS = 200.0
 PERIOD_NS = 5_000_000

@@ -26,7 +26,7 @@ from rig_runtime.interface import (
 )
 from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, join_graph
+from rig_testing.processes import Processes, graph_env, join_graph
 from wing_sim.plant import WingPlant
 from wing_sim.wing_params import WingParams
 

@@ -20,7 +20,7 @@ from pressure_scanner.tap_cloud import read_cloud
 from rig_runtime.interface import PRESSURE_TAPS, PRESSURE_TARE
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
+from rig_testing.processes import Processes, graph_env, join_graph, wait_for
 from wing_sim.plant import WingPlant
 from wing_sim.sim_scanner import alpha_rad, zero_offsets_pa
 

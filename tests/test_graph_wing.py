@@ -7,7 +7,7 @@ import numpy as np
 from graph_support import Observer, small_plan_design
 
 from rig_runtime.interface import PITCH_STATE, PRESSURE_TAPS, WING_COEFFICIENTS
-from rig_runtime.testing import Processes, graph_env, join_graph
+from rig_testing.processes import Processes, graph_env, join_graph
 
 TOPICS = {
     PITCH_STATE.name: ("sensor_msgs/msg/JointState", "stream"),

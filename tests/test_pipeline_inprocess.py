@@ -208,7 +208,7 @@ def test_identifier_names_a_hole_in_the_plan_index_at_once(campaign, monkeypatch
     plan index as soon as the next sample arrives: logged, and in the next status."""
     from aero_identification.identifier_node import PARAMETERS, Identifier
     from rig_runtime import Node
-    from rig_runtime.testing import graph_env, join_graph
+    from rig_testing.processes import graph_env, join_graph
 
     join_graph(graph_env(), monkeypatch.setenv)
     plan, stamps, u, _ = campaign
@@ -241,7 +241,7 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     from aero_identification.identification_session import PendingRefit
     from aero_identification.identifier_node import PARAMETERS, Identifier
     from rig_runtime import Node
-    from rig_runtime.testing import graph_env, join_graph, wait_for
+    from rig_testing.processes import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
     node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3", *NO_SCAN])
@@ -285,7 +285,7 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
     from aero_identification.identifier_node import PARAMETERS, Identifier
     from rig_runtime import Node
     from rig_runtime.anomaly import Anomaly
-    from rig_runtime.testing import graph_env, join_graph, wait_for
+    from rig_testing.processes import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
     args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false", *NO_SCAN]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 CONFIG = Path(__file__).resolve().parents[1] / "src" / "aero_rig" / "config"
 

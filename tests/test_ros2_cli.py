@@ -22,7 +22,7 @@ from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import PITCH_COMMAND
 from rig_runtime.launcher import Launcher
 from rig_runtime.qos import resolve_qos
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 ROS2 = Path(sys.executable).parent / "ros2"
 NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]

@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from rig_runtime.graph import package_share
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -138,7 +138,7 @@ def test_rig_launch_starts_the_hardware_nodes_against_the_simulated_devices(
     import threading
 
     from aero_rig.verdict import bag_topic_counts
-    from rig_runtime.testing import Processes, wait_for
+    from rig_testing.processes import Processes, wait_for
 
     env = _sourced(colcon_install, graph_env())
     env["TMPDIR"] = str(tmp_path)  # launch_ros leaves its launch_params_* files in TMPDIR

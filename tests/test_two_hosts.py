@@ -1,5 +1,5 @@
 """The rig on two machines: the simulated graph split over two hosts of a lab that the tests
-build and remove (rig_runtime.netlab: network namespaces on one switch). The rig PC runs the
+build and remove (rig_testing.netlab: network namespaces on one switch). The rig PC runs the
 generator, the actuator, the wing and the lift (``rig-launch sim.yaml --host rig``); the
 workstation runs the identifier and the recorder (``aero-rig campaign --host workstation``);
 a third host runs the ``ros2`` command.
@@ -35,7 +35,7 @@ from graph_support import (
 
 from rig_runtime import netlab
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
-from rig_runtime.testing import finish, graph_env, start_session, wait_for
+from rig_testing.processes import finish, graph_env, start_session, wait_for
 
 ROS2 = Path(sys.executable).parent / "ros2"
 RIG_NODES = ["/generator", "/lift", "/sim_actuator", "/sim_wing"]

@@ -33,8 +33,6 @@ setup(
     python_requires=">=3.11",
     entry_points={
         "console_scripts": [
-            "talker = rig_runtime.demo_nodes:talker_main",
-            "listener = rig_runtime.demo_nodes:listener_main",
             "recorder = rig_runtime.recorder:main",
             "rig-launch = rig_runtime.launcher:main",
         ],

@@ -320,7 +320,7 @@ def test_graph_argument_runs_any_graph_file(tmp_path: Path) -> None:
         "nodes": [
             {
                 "name": "talker",
-                "package": "rig_runtime",
+                "package": "rig_testing",
                 "executable": "talker",
                 "namespace": "/bench",
                 "parameters": ["talker.yaml", "pkg://aero_rig/config/lift.yaml"],

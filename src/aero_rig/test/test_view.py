@@ -36,7 +36,7 @@ from rig_runtime.interface import (
 )
 from rig_runtime.messages import new_message, serialize, set_stamp, typestore
 from rig_runtime.node import Node
-from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
+from rig_testing.processes import Processes, graph_env, join_graph, wait_for
 
 T0 = 1_700_000_000_000_000_000  # ns
 NEW_MODEL = "a model added later"

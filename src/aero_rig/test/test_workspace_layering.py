@@ -21,7 +21,7 @@ import pytest
 SRC = Path(__file__).resolve().parents[2]
 PACKAGES = sorted(p.parent.name for p in SRC.glob("*/package.xml"))
 # Modules that bring up a middleware when imported (directly or through what they import).
-MIDDLEWARE = ("rclpy", "rig_runtime.node")
+MIDDLEWARE = ("rclpy", "rig_runtime.node", "rig_runtime.node_main")
 ALGORITHM_PACKAGES = ("multisine_gen", "wing_sim", "aero_identification")
 
 
@@ -46,7 +46,7 @@ def _declared(package: str) -> set[str]:
     return {e.text or "" for e in root.iter() if e.tag in ("depend", "exec_depend")}
 
 
-def test_the_workspace_has_its_seven_packages() -> None:
+def test_the_workspace_has_its_eight_packages() -> None:
     assert PACKAGES == sorted(
         [
             "aero_identification",
@@ -55,6 +55,7 @@ def test_the_workspace_has_its_seven_packages() -> None:
             "pitch_actuator",
             "pressure_scanner",
             "rig_runtime",
+            "rig_testing",
             "wing_sim",
         ]
     )

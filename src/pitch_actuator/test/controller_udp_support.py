@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pitch_actuator.controller_protocol import seq_delta, unpack
-from rig_runtime.testing import start_port_printer
+from rig_testing.processes import start_port_printer
 
 TO_SERVER = "to_server"
 TO_CLIENT = "to_client"

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from rig_runtime.participant_profile import PROFILES_ENV, PROFILES_FILE, profiles_xml
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 # A participant and a writer made with the file as Fast DDS's default profiles.
 MAKE_A_WRITER = """

@@ -21,7 +21,7 @@ from rig_runtime.flow import (
 )
 from rig_runtime.interface import PITCH_STATE
 from rig_runtime.messages import new_message, set_stamp, stamp_to_ns
-from rig_runtime.testing import graph_env, join_graph, wait_for
+from rig_testing.processes import graph_env, join_graph, wait_for
 
 STATE = "/pitch/state"
 MS = 1_000_000  # ns

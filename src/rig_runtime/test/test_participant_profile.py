@@ -18,7 +18,7 @@ from rig_runtime.participant_profile import (
     profiles_xml,
 )
 from rig_runtime.ros_environment import RANGE_ENV, RosEnvironmentError
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 LOCATOR = "<locator><udpv4><address>{}</address></udpv4></locator>"
 

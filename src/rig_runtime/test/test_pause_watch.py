@@ -6,7 +6,7 @@ import pytest
 
 from rig_runtime.node import PAUSE_WATCH_S, Node
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 
 @pytest.fixture

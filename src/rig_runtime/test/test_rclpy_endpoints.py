@@ -16,7 +16,7 @@ from rig_runtime.interface import PITCH_COMMAND
 from rig_runtime.node import Node
 from rig_runtime.params import Parameter, ParameterError
 from rig_runtime.ros_environment import ArgumentError
-from rig_runtime.testing import graph_env, join_graph
+from rig_testing.processes import graph_env, join_graph
 
 PARAMS = [
     Parameter("fs", 200.0, "sample rate [Hz]", min=1.0, max=10000.0),

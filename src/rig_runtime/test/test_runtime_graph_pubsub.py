@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 
 from rig_runtime import Node
-from rig_runtime.demo_nodes import make_message
-from rig_runtime.testing import Processes, graph_env, join_graph, wait_for
+from rig_testing.demo_nodes import make_message
+from rig_testing.processes import Processes, graph_env, join_graph, wait_for
 
 pytestmark = pytest.mark.slow  # node processes talking DDS: `make test-fast` skips them
 
@@ -33,9 +33,9 @@ def test_10000_reliable_messages_none_lost_in_order(tmp_path: Path) -> None:
     result = tmp_path / "listener.json"
     with Processes(graph_env(), log_dir=tmp_path) as procs:
         listener = procs.start_entry(
-            "rig_runtime", "listener", *_listener_args(result, count=10000, qos="stream")
+            "rig_testing", "listener", *_listener_args(result, count=10000, qos="stream")
         )
-        procs.start_entry("rig_runtime", "talker", *_talker_args(count=10000, qos="stream"))
+        procs.start_entry("rig_testing", "talker", *_talker_args(count=10000, qos="stream"))
         assert wait_for(lambda: listener.poll() is not None, 60), procs.log("listener")
     summary = json.loads(result.read_text())
     assert summary["received"] == 10000
@@ -55,10 +55,10 @@ def test_a_writer_leaving_at_once_still_delivers_to_a_paused_reader(tmp_path: Pa
     result = tmp_path / "listener.json"
     with Processes(graph_env(), log_dir=tmp_path) as procs:
         listener = procs.start_entry(
-            "rig_runtime", "listener", *_listener_args(result, count=3000, qos="stream")
+            "rig_testing", "listener", *_listener_args(result, count=3000, qos="stream")
         )
         talker = procs.start_entry(
-            "rig_runtime",
+            "rig_testing",
             "talker",
             *_talker_args(count=3000, qos="stream", linger_s=0.0, start_delay_s=0.3),
         )
@@ -83,7 +83,7 @@ def test_latched_topic_reaches_late_subscriber(tmp_path: Path) -> None:
     result = tmp_path / "late.json"
     with Processes(graph_env(), log_dir=tmp_path) as procs:
         talker = procs.start_entry(
-            "rig_runtime",
+            "rig_testing",
             "talker",
             *_talker_args(count=1, qos="latched", wait_for_subscribers=0, linger_s=30.0),
         )
@@ -93,7 +93,7 @@ def test_latched_topic_reaches_late_subscriber(tmp_path: Path) -> None:
         )
         assert talker.poll() is None, procs.log("talker")  # still there to serve the late join
         listener = procs.start_entry(
-            "rig_runtime", "listener", *_listener_args(result, count=1, qos="latched")
+            "rig_testing", "listener", *_listener_args(result, count=1, qos="latched")
         )
         assert wait_for(lambda: listener.poll() is not None, 30), procs.log("listener")
     assert json.loads(result.read_text())["received"] == 1
@@ -103,10 +103,10 @@ def test_sensor_qos_pubsub(tmp_path: Path) -> None:
     result = tmp_path / "sensor.json"
     with Processes(graph_env(), log_dir=tmp_path) as procs:
         listener = procs.start_entry(
-            "rig_runtime", "listener", *_listener_args(result, qos="sensor", message="taps")
+            "rig_testing", "listener", *_listener_args(result, qos="sensor", message="taps")
         )
         talker = procs.start_entry(
-            "rig_runtime",
+            "rig_testing",
             "talker",
             *_talker_args(count=400, rate_hz=200.0, qos="sensor", message="taps", linger_s=0.5),
         )
@@ -128,7 +128,7 @@ def _publish_then_idle(
     join_graph(env, monkeypatch.setenv)
     with Processes(env, log_dir=tmp_path) as procs:
         listener = procs.start_entry(
-            "rig_runtime", "listener", *_listener_args(result, count=5, qos="stream")
+            "rig_testing", "listener", *_listener_args(result, count=5, qos="stream")
         )
         node = Node("batch_talker", [], [])
         try:

@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import pytest
 import yaml
 
 from rig_runtime.graph import load_graph
-from rig_runtime.testing import descendants, finish, graph_env, process_gone, wait_for
+from rig_testing.processes import descendants, finish, graph_env, process_gone, wait_for
 
 pytestmark = pytest.mark.slow  # node processes talking DDS: `make test-fast` skips them
 
@@ -28,13 +29,13 @@ def _graph(tmp_path: Path, talker_exit: int, listener_result: Path) -> Path:
         "nodes": [
             {
                 "name": "listener",
-                "package": "rig_runtime",
+                "package": "rig_testing",
                 "executable": "listener",
                 "parameters": ["params.yaml"],
             },
             {
                 "name": "talker",
-                "package": "rig_runtime",
+                "package": "rig_testing",
                 "executable": "talker",
                 "parameter_overrides": {"count": 200, "exit_code": talker_exit, "linger_s": 0.2},
             },
@@ -45,10 +46,10 @@ def _graph(tmp_path: Path, talker_exit: int, listener_result: Path) -> Path:
     return path
 
 
-def _launch(graph: Path, *extra: str) -> subprocess.Popen[str]:
+def _launch(graph: Path, *extra: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "rig_runtime.launcher", str(graph), *extra],
-        env=graph_env(),
+        env=env or graph_env(),
         stderr=subprocess.PIPE,
         stdout=subprocess.DEVNULL,
         text=True,
@@ -88,16 +89,38 @@ def test_crashing_node_stops_graph_nonzero_naming_it(tmp_path: Path) -> None:
 
 
 def test_a_node_failing_at_start_is_named_with_its_own_error_line(tmp_path: Path) -> None:
-    """A bad parameter: the launcher's last line carries the node's own [FATAL] line, and the
-    node's output is shown with its [name] prefix, as ros2 launch shows it."""
-    result = tmp_path / "listener.json"
-    graph = _graph(tmp_path, 0, result)
-    proc = _launch(graph, "-p", "talker.count:=-5")
+    """A node that fails at its start (here: an executor its environment names that does not
+    exist, which only the node reads): the launcher's last line carries the node's own
+    [FATAL] line, and the node's output is shown with its [name] prefix, as ros2 launch
+    shows it."""
+    graph = _graph(tmp_path, 0, tmp_path / "listener.json")
+    proc = _launch(graph, env=graph_env(RIG_RCLPY_EXECUTOR="bogus"))
     _, err = finish(proc, 60)
     assert proc.returncode != 0
     last = [line for line in err.splitlines() if line.startswith("[rig-launch] error")][-1]
-    assert "node 'talker' exited with code 2: [FATAL] [talker]: parameter 'count'" in last, err
-    assert "[talker] [FATAL]" in err
+    assert re.search(
+        r"node '(talker|listener)' exited with code 2: \[FATAL\] \[(talker|listener)\]: "
+        r"RIG_RCLPY_EXECUTOR='bogus'",
+        last,
+    ), err
+    assert re.search(r"\[(talker|listener)\] \[FATAL\]", err), err
+
+
+def test_a_bad_parameter_is_refused_before_any_node_starts(tmp_path: Path) -> None:
+    """A parameter outside its declaration never reaches a node: exit 2, the node's own line."""
+    graph = _graph(tmp_path, 0, tmp_path / "listener.json")
+    proc = _launch(graph, "-p", "talker.count:=-5")
+    _, err = finish(proc, 60)
+    assert proc.returncode == 2, err
+    assert (
+        err.strip()
+        .splitlines()[-1]
+        .startswith(
+            "[rig-launch] error: [FATAL] [talker]: parameter 'count' = -5 (from --ros-args "
+            "(count:=-5)) is invalid"
+        )
+    ), err
+    assert "[talker]" not in err.replace("[FATAL] [talker]", "") and "[listener]" not in err
 
 
 def test_duration_and_sigterm_reap_every_child(tmp_path: Path) -> None:
@@ -130,7 +153,7 @@ def test_graph_description_errors(tmp_path: Path) -> None:
         load_graph(bad)
     missing = tmp_path / "missing.yaml"
     missing.write_text(
-        "nodes:\n  - {name: a, package: rig_runtime, executable: talker, parameters: [nope.yaml]}\n"
+        "nodes:\n  - {name: a, package: rig_testing, executable: talker, parameters: [nope.yaml]}\n"
     )
     with pytest.raises(GraphError, match="does not exist"):
         load_graph(missing)
@@ -280,7 +303,7 @@ def test_a_launch_by_host_starts_that_hosts_nodes_and_waits_for_all(tmp_path: Pa
     with pytest.raises(GraphError, match="places no host for listener"):
         Launcher(unplaced, hosts=["rig"])
     bad = tmp_path / "bad_host.yaml"
-    bad.write_text("nodes:\n  - {name: a, package: rig_runtime, executable: talker, host: 'a b'}\n")
+    bad.write_text("nodes:\n  - {name: a, package: rig_testing, executable: talker, host: 'a b'}\n")
     with pytest.raises(GraphError, match="'host' must be a name"):
         load_graph(bad)
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from rig_runtime.params import Parameter, ParameterError, resolve_parameters
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 PARAMS = [
     Parameter("rate_hz", 200.0, "sample rate", min=1.0, max=1000.0),
@@ -61,7 +61,7 @@ def test_unknown_name_in_yaml(tmp_path: Path) -> None:
     ],
 )
 def test_node_process_exits_nonzero_naming_parameter(args: list[str], fragment: str) -> None:
-    code = "import sys; from rig_runtime.demo_nodes import talker_main; sys.exit(talker_main())"
+    code = "import sys; from rig_testing.talker import main; sys.exit(main())"
     proc = subprocess.run(
         [sys.executable, "-c", code, "--ros-args", *args],
         env=graph_env(),
@@ -74,7 +74,7 @@ def test_node_process_exits_nonzero_naming_parameter(args: list[str], fragment: 
 
 
 def test_help_lists_parameters() -> None:
-    code = "import sys; from rig_runtime.demo_nodes import talker_main; sys.exit(talker_main())"
+    code = "import sys; from rig_testing.talker import main; sys.exit(main())"
     proc = subprocess.run(
         [sys.executable, "-c", code, "--help"], capture_output=True, text=True, timeout=60
     )

@@ -15,9 +15,9 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from rig_runtime.bag_recover import _Scan, is_intact, read_records, recover_bag
-from rig_runtime.demo_nodes import TAP_COUNT
 from rig_runtime.messages import deserialize
-from rig_runtime.testing import Processes, graph_env, wait_for
+from rig_testing.demo_nodes import TAP_COUNT
+from rig_testing.processes import Processes, graph_env, wait_for
 
 pytestmark = pytest.mark.slow  # node processes talking DDS: `make test-fast` skips them
 
@@ -57,7 +57,7 @@ def _start(procs: Processes, bag: Path, count: int, *params: str, rate_hz: float
         name="recorder",
     )
     talker = procs.start_entry(
-        "rig_runtime",
+        "rig_testing",
         "talker",
         "--ros-args",
         "-p",

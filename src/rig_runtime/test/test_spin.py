@@ -5,7 +5,7 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from rig_runtime.node import EXECUTOR_ENV, Node
-from rig_runtime.testing import graph_env
+from rig_testing.processes import graph_env
 
 
 @pytest.fixture(params=["events", "single"])

@@ -8,7 +8,7 @@ import json
 import subprocess
 from pathlib import Path
 
-from rig_runtime.testing import start_port_printer
+from rig_testing.processes import start_port_printer
 
 
 def run_sim_scanner(args: list[str], stderr_path: Path, timeout_s: float) -> dict[str, int]:

@@ -12,7 +12,7 @@ from scanner_udp_support import run_sim_scanner
 
 from pressure_scanner.scanner_client import ScannerClient, ScannerClientConfig, TapPressures
 from pressure_scanner.scanner_protocol import ChannelMap
-from rig_runtime.testing import wait_for
+from rig_testing.processes import wait_for
 from wing_sim.plant import WingPlant
 from wing_sim.sim_scanner import zero_offsets_pa
 

@@ -1,4 +1,5 @@
-"""Talker and listener: minimal nodes to check a graph, the transport and the launcher.
+"""Talker and listener: minimal nodes to check a graph, the transport and the launcher (their
+processes: talker.py and listener.py).
 
 ``talker`` publishes ``count`` numbered messages (JointState, or a 49-tap PointCloud2) at
 ``rate_hz`` (0 = as fast as the transport takes); ``listener`` counts them, checks their order
@@ -7,18 +8,16 @@ loss and order accounting.
 """
 
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .interface import PITCH_JOINT
-from .messages import set_stamp
-from .node import Node
-from .node_main import run_node
-from .params import Parameter
+from rig_runtime.interface import PITCH_JOINT
+from rig_runtime.messages import set_stamp
+from rig_runtime.node import Node
+from rig_runtime.params import Parameter
 
 COMMON = [
     Parameter("topic", "/chatter", "topic name"),
@@ -156,15 +155,3 @@ class Listener:
                 "span_s": (self.last_ns - (self.first_ns or self.last_ns)) / 1e9,
             }
             Path(self.node.params["result_file"]).write_text(json.dumps(summary))
-
-
-def talker_main(argv: list[str] | None = None) -> int:
-    return run_node(Talker, "talker", TALKER_PARAMETERS, argv, description=__doc__ or "")
-
-
-def listener_main(argv: list[str] | None = None) -> int:
-    return run_node(Listener, "listener", LISTENER_PARAMETERS, argv, description=__doc__ or "")
-
-
-if __name__ == "__main__":
-    sys.exit(talker_main())

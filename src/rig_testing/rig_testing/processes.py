@@ -144,7 +144,7 @@ class Processes:
     def start_entry(
         self, package: str, executable: str, *args: str, name: str | None = None
     ) -> Any:
-        from .graph import entry_point
+        from rig_runtime.graph import entry_point
 
         module, _, func = entry_point(package, executable).partition(":")
         code = f"import sys; from {module} import {func} as m; sys.exit(m())"
