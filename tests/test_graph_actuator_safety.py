@@ -253,20 +253,30 @@ def _check_hold_then_ramp(
     assert np.all(np.abs(pitch[at_safe] - SAFE_DEG) <= MEASUREMENT_TOL_DEG)
 
 
-def test_lost_command_stream_holds_then_ramps_to_safe_angle(actuator: Any) -> None:
-    client, _ = actuator(
-        stream_timeout_s=0.2,
-        watchdog_timeout_s=WATCHDOG_S,
-        hold_s=HOLD_S,
-        ramp_rate_deg_s=RAMP_DEG_S,
-        safe_angle_deg=SAFE_DEG,
-    )
-    client.drive([12.0] * 100)
+# The node's settings when its command stream falls silent: a short hold and a fast ramp.
+SILENCE = {
+    "stream_timeout_s": 0.2,
+    "watchdog_timeout_s": WATCHDOG_S,
+    "hold_s": HOLD_S,
+    "ramp_rate_deg_s": RAMP_DEG_S,
+    "safe_angle_deg": SAFE_DEG,
+}
+
+
+def _wait_hold_and_ramp(client: ActuatorClient) -> float:
+    """After the last command (at 12°), wait for the states of the hold and of the ramp to the
+    safe angle (the node runs on in real time: about 1.4 s of them); the last command's time."""
     t_last = (client.stamp(client.next_k - 1) - client.t0_ns) / 1e9
     t_end = t_last + WATCHDOG_S + HOLD_S + (12.0 - SAFE_DEG) / RAMP_DEG_S + 0.3
-    # Without commands the node runs on in real time: about 1.4 s of states to come.
     done = client.node.spin_until(lambda: client.series()[0][-1] >= t_end, 15.0)
     assert done, f"states stopped at {client.series()[0][-1]:.3f} s, wanted {t_end:.3f} s"
+    return t_last
+
+
+def test_lost_command_stream_holds_then_ramps_to_safe_angle(actuator: Any) -> None:
+    client, _ = actuator(**SILENCE)
+    client.drive([12.0] * 100)
+    t_last = _wait_hold_and_ramp(client)
     t, pitch = client.series()
     # Free-running states continue the stamp grid: one per 5 ms, none twice.
     assert np.all(np.diff(np.round(t * FS).astype(int)) == 1)
@@ -280,13 +290,7 @@ def test_lost_command_stream_holds_then_ramps_to_safe_angle(actuator: Any) -> No
 def test_the_plans_end_then_silence_holds_and_ramps_with_no_error_line(actuator: Any) -> None:
     """The plan's end disarms the stream watchdog: the silence after it holds, then ramps to
     the safe angle as after a trip, but the node trips nothing and logs no ERROR line."""
-    client, procs = actuator(
-        stream_timeout_s=0.2,
-        watchdog_timeout_s=WATCHDOG_S,
-        hold_s=HOLD_S,
-        ramp_rate_deg_s=RAMP_DEG_S,
-        safe_angle_deg=SAFE_DEG,
-    )
+    client, procs = actuator(**SILENCE)
     client.drive([12.0] * 100)
     client.end_plan()
     # Commands flow until the node's diagnostics say it expects the stream's end (no race
@@ -295,10 +299,7 @@ def test_the_plans_end_then_silence_holds_and_ramps_with_no_error_line(actuator:
     while not any(d.get("stream_end_expected") == "True" for d in client.diagnostics):
         assert time.monotonic() < deadline, "the node never took the plan's end"
         client.drive([12.0] * 10)
-    t_last = (client.stamp(client.next_k - 1) - client.t0_ns) / 1e9
-    t_end = t_last + WATCHDOG_S + HOLD_S + (12.0 - SAFE_DEG) / RAMP_DEG_S + 0.3
-    done = client.node.spin_until(lambda: client.series()[0][-1] >= t_end, 15.0)
-    assert done, f"states stopped at {client.series()[0][-1]:.3f} s, wanted {t_end:.3f} s"
+    t_last = _wait_hold_and_ramp(client)
     diag = client.wait_diagnostics(lambda d: d.get("mode") == "safe", 15.0)
     assert diag["watchdog_trips"] == "0", diag
     t, pitch = client.series()
