@@ -42,8 +42,8 @@ from graph_support import (
 )
 
 from multisine_gen.plan_format import plan_to_json
-from rig_runtime import netlab
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
+from rig_testing import netlab
 from rig_testing.processes import graph_env
 
 CASES = ("one_host", "two_hosts", "static_peers", "pulled_3s", "pulled_past_lease")

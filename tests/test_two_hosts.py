@@ -33,8 +33,8 @@ from graph_support import (
     two_host_campaign,
 )
 
-from rig_runtime import netlab
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
+from rig_testing import netlab
 from rig_testing.processes import finish, graph_env, start_session, wait_for
 
 ROS2 = Path(sys.executable).parent / "ros2"

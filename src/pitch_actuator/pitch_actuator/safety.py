@@ -238,7 +238,7 @@ class SafetyGovernor:
 
     @property
     def end_expected(self) -> bool:
-        """True after `end_stream()` until a command resumes the stream after the silence."""
+        """True after `end_stream()` while the stream still flows (until its silence)."""
         return self._end_expected
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -297,7 +297,7 @@ class SafetyGovernor:
                         "resumed",
                         f"command stream resumed after the plan's end at {self._setpoint:.3f}°",
                     )
-                    self._end_expected = False  # a new stream: its loss trips the watchdog
+                self._end_expected = False  # a new stream: its loss trips the watchdog
                 self._tripped = False
                 self._planned_hold = False
                 self._mode = GovernorMode.TRACKING
@@ -324,8 +324,9 @@ class SafetyGovernor:
         stream, watched again."""
         t = self._checked_time(t_s)
         setpoint = self._advance(t)
-        self._end_expected = True
-        self._end_reason = reason
+        if self._mode is GovernorMode.TRACKING:  # holding, ramping or stopped: nothing to end
+            self._end_expected = True
+            self._end_reason = reason
         return setpoint
 
     def stop(self, t_s: float, reason: str = "stop requested") -> float:
@@ -341,6 +342,7 @@ class SafetyGovernor:
                 f"ramping to {self.limits.safe_angle_deg}° at {self.limits.ramp_rate_deg_s}°/s",
             )
         self._stopped = True
+        self._end_expected = self._planned_hold = False  # a stop is no planned end
         if self._mode in (GovernorMode.IDLE, GovernorMode.TRACKING):
             self._enter_hold(t)
         return setpoint
@@ -352,7 +354,7 @@ class SafetyGovernor:
         if self._stopped:
             self._stopped = False
             self._tripped = False
-            self._planned_hold = False
+            self._end_expected = self._planned_hold = False
             self._mode = GovernorMode.IDLE
             self._hold_until = math.inf
             self._target = self._setpoint
@@ -446,6 +448,7 @@ class SafetyGovernor:
                         f"{lim.safe_angle_deg}° at {lim.ramp_rate_deg_s}°/s"
                     )
                     if self._end_expected:
+                        self._end_expected = False  # consumed: this silence is the end
                         self._planned_hold = True
                         self._emit(
                             DiagnosticLevel.OK,

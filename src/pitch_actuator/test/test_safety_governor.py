@@ -170,6 +170,30 @@ def test_a_command_stream_resumed_after_the_plans_end_is_watched_again() -> None
     assert [e.kind for e in gov.drain_events()] == ["stream_end", "resumed", "watchdog"]
 
 
+def test_the_plans_end_does_not_outlive_a_trip_a_stop_or_its_silence() -> None:
+    """A plan's end is one silence: after a trip, a stop or the planned hold itself, the next
+    lost stream trips the watchdog again."""
+    for before in ("trip", "stop", "planned"):
+        gov = SafetyGovernor(LIMITS, initial_deg=0.0)
+        gov.command(0.005, 5.0)
+        if before == "trip":
+            gov.update(0.4)  # tripped while the plan still ran
+            gov.end_stream(0.4, "the plan has ended")  # arrives during the hold: nothing to end
+        elif before == "stop":
+            gov.end_stream(0.01, "the plan has ended")
+            gov.stop(0.02)
+            gov.resume(0.03)
+        else:
+            gov.end_stream(0.01, "the plan has ended")
+            gov.update(0.4)
+        assert not gov.end_expected, before
+        for k in range(1, 30):  # a new stream
+            gov.command(0.5 + k / FS, 8.0)
+        trips = gov.counters.watchdog_trips
+        gov.update(1.5)  # and its loss
+        assert gov.counters.watchdog_trips == trips + 1, before
+
+
 def test_command_stream_resuming_after_watchdog_is_tracked_rate_limited() -> None:
     gov = SafetyGovernor(LIMITS, initial_deg=5.0)
     gov.command(0.005, 5.0)

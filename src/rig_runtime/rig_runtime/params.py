@@ -8,6 +8,7 @@ invalid raises :class:`ParameterError` before the node creates a publisher.
 """
 
 import math
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -141,12 +142,19 @@ _ParameterFileLoader.add_constructor(
     "tag:yaml.org,2002:python/tuple",
     lambda loader, node: list(loader.construct_sequence(node)),  # type: ignore[arg-type]
 )
+# rcl reads ``1e-6`` as a double (YAML 1.2's float); PyYAML's YAML 1.1 resolver wants a dot and
+# would make it a string. After the int resolver, so that ``5`` stays an int.
+_ParameterFileLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
 def _parse_override(text: str) -> Any:
     """ROS 2 parses ``-p name:=value`` values as YAML scalars or flow sequences."""
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_ParameterFileLoader)
     except yaml.YAMLError as exc:
         raise ParameterError(f"cannot parse parameter value {text!r}: {exc}") from exc
 

@@ -28,6 +28,18 @@ def test_defaults_files_and_overrides_in_ros_order(tmp_path: Path) -> None:
     assert ps["gains"] == [1.0, 2.0]
 
 
+def test_exponents_without_a_dot_are_floats_as_rcl_reads_them(tmp_path: Path) -> None:
+    """rcl reads ``1e2`` as a double, in a file and after ``-p``: so do the checks before a
+    graph starts (PyYAML's YAML 1.1 alone would make it a string and refuse it)."""
+    f = tmp_path / "p.yaml"
+    f.write_text("node:\n  ros__parameters:\n    rate_hz: 1e2\n")
+    for files, overrides in (([f], []), ([], [("rate_hz", "2.5E+2")])):
+        for as_ros_args in (False, True):
+            ps = resolve_parameters(PARAMS, "/node", files, overrides, as_ros_args=as_ros_args)
+            assert ps["rate_hz"] in (100.0, 250.0) and isinstance(ps["rate_hz"], float)
+    assert resolve_parameters(PARAMS, "/node", [], [("count", "5")])["count"] == 5
+
+
 @pytest.mark.parametrize(
     ("override", "fragment"),
     [
