@@ -221,7 +221,7 @@ def resolve_parameters(
     (NAME:=VALUE)``, node_parameters.declare_parameters), so that an error reads as the node's
     own line."""
     if as_ros_args:
-        merged = default_parameters(declared)
+        merged = resolve_parameters(declared, fq_node_name)  # only the declarations
         given: dict[str, Any] = {}
         for file in param_files:
             for section in _file_sections(Path(file), fq_node_name):

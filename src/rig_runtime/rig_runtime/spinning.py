@@ -8,8 +8,6 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from rclpy.task import Future  # node.py, this module's only importer, has loaded rclpy
-
 if TYPE_CHECKING:
     from .node import Node
 
@@ -30,6 +28,9 @@ class Spinner:
     disappearance stops it; None: not watched."""
 
     def __init__(self, node: "Node", executor: Any, context: Any, launcher_pid: int | None) -> None:
+        from rclpy.task import Future
+
+        self._future = Future
         self.node = node
         self.executor = executor
         self.context = context
@@ -91,7 +92,7 @@ class Spinner:
         timer = self.node.create_timer(SPIN_TURN_S, check_turn)
         try:
             while not self.shutdown_requested and self.context.ok():
-                self._turn = Future()
+                self._turn = self._future()
                 self.executor.spin_until_future_complete(self._turn, timeout_sec=SPIN_TURN_S)
                 check_turn()
         finally:
