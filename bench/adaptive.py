@@ -145,7 +145,7 @@ def on_common_sines(fixed: Path, adaptive: Path) -> dict[tuple[str, str], float]
     adaptive plan's shorter levels move the sines to other stall episodes of the plant)."""
     import dataclasses
 
-    from aero_identification.campaign_dataset import campaign_dataset
+    from aero_identification.campaign_source import campaign_dataset
     from aero_identification.pipeline import identify
     from aero_rig.offline import read_campaign_bag, recorded_config
 

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.signal import freqz, lfilter
 
 from aero_identification import BLA, PeriodicData, estimate_bla, transient_periods
-from aero_identification.data import random_phase_period
+from aero_identification.periodic_data import random_phase_period
 
 N, P, M = 8192, 8, 10
 FS = 200.0

@@ -24,7 +24,7 @@ import os
 import time
 from pathlib import Path
 
-from aero_identification.config import IdentificationConfig
+from aero_identification.hyperparameters import IdentificationConfig
 from aero_identification.pipeline import identify
 from aero_identification.records import read_records, records_dataset
 from aero_identification.validation import record_error

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from aero_identification import refit_worker
-from aero_identification.config import IdentificationConfig
+from aero_identification.hyperparameters import IdentificationConfig
 from aero_identification.period_assembly import CampaignAssembler
 from aero_rig.simulation import simulate_plan
 from multisine_gen.campaigns import default_plan, short_plan

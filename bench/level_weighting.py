@@ -24,7 +24,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from aero_identification.campaign_dataset import campaign_dataset
+from aero_identification.campaign_source import campaign_dataset
 from aero_identification.estimation_sets import estimation_sets
 from aero_identification.pipeline import identify
 from aero_identification.scan import periodic_error

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from aero_identification.pipeline import identify
 from aero_identification.report import write_report
-from aero_identification.tables import FLOOR_ROW
+from aero_identification.report_tables import FLOOR_ROW
 from aero_rig.offline import read_campaign_bag, recorded_config
 
 ROWS = ("BLA SS", "PNLSS", "B-spline LPV", "selected", "Beddoes-Leishman")
@@ -36,7 +36,7 @@ def main() -> int:
     parser.add_argument("bag", help="a campaign's bag/ directory")
     parser.add_argument("--out", default=None, help="also write the report here")
     args = parser.parse_args()
-    from aero_identification.campaign_dataset import campaign_dataset
+    from aero_identification.campaign_source import campaign_dataset
 
     data = read_campaign_bag(args.bag)
     config = recorded_config(data)

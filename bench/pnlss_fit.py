@@ -74,11 +74,11 @@ def odd_multisine(rng: np.random.Generator, lines: np.ndarray) -> np.ndarray:
 
 def main() -> None:
     from aero_identification.bla import estimate_bla
-    from aero_identification.data import PeriodicData
     from aero_identification.metrics import relative_rms_error
-    from aero_identification.models import STATE_BOUND
+    from aero_identification.periodic_data import PeriodicData
     from aero_identification.pnlss import PnlssSettings, _Layout, fit_pnlss
     from aero_identification.pnlss_kernels import jacobian_records, simulate_records
+    from aero_identification.state_space_models import STATE_BOUND
     from aero_identification.subspace import fit_linear_ss
 
     rng = np.random.default_rng(2024)

@@ -50,8 +50,8 @@ def duffing_case() -> dict[str, float]:
     from pnlss_fit import FS, P_SETTLE, P_TRAIN, N, duffing_rk4, odd_multisine
 
     from aero_identification.bla import estimate_bla
-    from aero_identification.data import PeriodicData
     from aero_identification.metrics import relative_rms_error
+    from aero_identification.periodic_data import PeriodicData
     from aero_identification.pnlss import PnlssSettings, fit_pnlss
     from aero_identification.subspace import fit_linear_ss
 

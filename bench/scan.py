@@ -48,7 +48,7 @@ MAX_ITER = 50
 
 
 def make_data(periods: int) -> tuple[Any, Any]:
-    from aero_identification.data import PeriodicData
+    from aero_identification.periodic_data import PeriodicData
 
     rng = np.random.default_rng(2024)
     n = duffing.N
@@ -83,7 +83,7 @@ def main() -> None:
 
     train, val = make_data(args.periods)
     # Linear models of every order from the BLA of both records (two realizations).
-    from aero_identification.data import PeriodicData
+    from aero_identification.periodic_data import PeriodicData
 
     both = PeriodicData(
         np.concatenate([train.u[:, :2], val.u[:, :2]], axis=2),

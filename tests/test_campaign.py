@@ -165,7 +165,7 @@ def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
 def test_every_view_of_the_rrd_holds_what_the_identification_sent(campaign) -> None:
     """The campaign's .rrd, read back with Rerun's reader: every entity the final blueprint lays
     out holds data, and the model entities hold what models.json says, model by model."""
-    from aero_identification import model_message as mm
+    from aero_identification import model_payload as mm
     from aero_rig.view import slug
     from aero_rig.view.blueprint import cl_alpha_to_view
     from aero_rig.view.logger import finite_runs

@@ -24,11 +24,11 @@ from typing import Any
 import numpy as np
 
 from aero_identification import pipeline
-from aero_identification.campaign_dataset import campaign_dataset
-from aero_identification.config import IdentificationConfig
+from aero_identification.campaign_source import campaign_dataset
+from aero_identification.hyperparameters import IdentificationConfig
+from aero_identification.identification_result import IdentificationResult
 from aero_identification.period_assembly import CampaignAssembler
 from aero_identification.report import write_report
-from aero_identification.results import IdentificationResult
 from aero_rig.simulation import T0_NS, SimulatedRun, simulate_plan
 from multisine_gen.campaigns import short_plan
 from wing_sim.wing_params import WingParams

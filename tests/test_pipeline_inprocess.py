@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from aero_identification import estimation_sets, pipeline, pnlss_training
-from aero_identification.campaign_dataset import campaign_dataset
-from aero_identification.config import IdentificationConfig
+from aero_identification.campaign_source import campaign_dataset
+from aero_identification.hyperparameters import IdentificationConfig
+from aero_identification.identification_result import IdentificationResult
 from aero_identification.period_assembly import CampaignAssembler
-from aero_identification.results import IdentificationResult
 from aero_rig.simulation import T0_NS as T0
 from aero_rig.simulation import simulate_plan
 from multisine_gen.campaigns import short_plan
@@ -544,7 +544,7 @@ def test_the_semi_empirical_baseline_is_calibrated_on_the_plans_sweep(campaign, 
         "| Beddoes-Leishman |" in md
         and "| Beddoes-Leishman |" not in (result.tables()["table1_level1"][0])
     )
-    from aero_identification import model_message as mm
+    from aero_identification import model_payload as mm
 
     for prediction in result.predictions:
         assert mm.BEDDOES_LEISHMAN in dict(mm.prediction_series(prediction))
@@ -562,7 +562,7 @@ def test_the_semi_empirical_baseline_is_calibrated_on_the_plans_sweep(campaign, 
 
 
 def test_the_second_class_and_the_selected_model(campaign, tmp_path) -> None:
-    from aero_identification import model_message as mm
+    from aero_identification import model_payload as mm
     from aero_identification.report import write_report
 
     result = identify(_assemble(campaign), ACCOUNT_CONFIG, final=True)

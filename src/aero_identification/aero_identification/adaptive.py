@@ -50,7 +50,7 @@ import numpy as np
 from rig_runtime.params import Parameter
 
 from .bla import detection_lines, estimate_bla, frf_noise_variance
-from .data import PeriodicData
+from .periodic_data import PeriodicData
 
 # clustering.py (scikit-learn) is imported where it is used: the identifier node imports this
 # module, and loads it only in an adaptive run (bla.py needs numpy only).
@@ -82,8 +82,8 @@ class AdaptiveRules:
     @staticmethod
     def at(values: tuple[float, ...], rank: int, levels: int) -> float:
         """The threshold of the level of offset rank ``rank`` (0 = lowest) of ``levels``: the
-        values are for the low, medium and high levels as campaign_dataset names them (two
-        levels are low and high), the last one for any level beyond."""
+        values are for the low, medium and high levels as campaign_source.level_names names
+        them (two levels are low and high), the last one for any level beyond."""
         position = {1: [0], 2: [0, 2]}.get(levels, list(range(levels)))[rank]
         return float(values[min(position, len(values) - 1)])
 
@@ -283,7 +283,8 @@ def judge_realization(
         return Verdict("go_on", f"{periods_done} of at least {bounds.min_periods} periods")
     if current.P < earlier_periods:
         # The nonparametric estimators take the same P from every realization
-        # (campaign_dataset): ending here would discard the earlier realizations' periods.
+        # (campaign_source.equal_periods): ending here would discard the earlier realizations'
+        # periods.
         return Verdict(
             "go_on",
             f"{current.P} of the {earlier_periods} periods the earlier realizations have",

@@ -38,8 +38,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from .data import PeriodicData
 from .dataset import QuasiStaticSweep
+from .periodic_data import PeriodicData
 
 __all__ = [
     "BeddoesLeishman",

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aero_identification.data import PeriodicData
 from aero_identification.lpm import frf_variance, lpm_periodic
+from aero_identification.periodic_data import PeriodicData
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,7 +41,7 @@ class BLA:
         M: number of realizations used.
         P: number of periods per realization used (the fewest, when `period_counts` differ).
         U_mean: (F, M) complex input spectrum at the excited lines, averaged over the periods of
-            each realization (1/√N DFT scaling, see data.py).
+            each realization (1/√N DFT scaling, see periodic_data.py).
         Y_mean: (F, M) complex output spectrum at the excited lines, same averaging.
         excited_level: (F,) RMS over realizations of |Y_mean| at the excited lines (Fig. 6).
         odd_lines, odd_freq: (F_o,) non-excited odd detection lines in the band, and their Hz.

@@ -35,15 +35,15 @@ import numpy as np
 
 from .beddoes_leishman import BeddoesLeishman, fit_beddoes_leishman
 from .bspline_lpv import BSplineLPV, LpvSettings, fit_bspline_lpv
-from .config import IdentificationConfig
-from .data import PeriodicData
 from .dataset import Dataset, QuasiStaticSweep
 from .estimation_sets import EstimationSets, ready_levels
-from .level_models import level_models
-from .models import LinearStateSpace, PNLSSModel
+from .hyperparameters import IdentificationConfig
+from .identification_result import EstimationSpread, IdentificationResult, LevelResult, Log
+from .level_identification import level_models
+from .periodic_data import PeriodicData
 from .pnlss_training import fit_client, level_weights, scan_levels
-from .results import EstimationSpread, IdentificationResult, LevelResult, Log
 from .scan import Candidate, run_fits
+from .state_space_models import LinearStateSpace, PNLSSModel
 from .subspace import fit_linear_ss
 from .validation import validate
 
@@ -202,7 +202,7 @@ def estimation_bootstrap(
     the cost, are independent fits and run on the scan's executor (`run_refits`). With
     ``config.bootstrap_scan`` and a scanned estimate, each replicate's all-levels PNLSS comes
     from its own structure scan instead (`scan_levels`, one after another, each on the
-    executor), so that the spread includes the selection (Efron 2014, see config.py)."""
+    executor), so that the spread includes the selection (Efron 2014, see hyperparameters.py)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     every, level1 = refit_candidates(result, config)

@@ -36,9 +36,9 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import BSpline
 
-from .data import PeriodicData
-from .models import LinearStateSpace
 from .monomials import monomial_exponents
+from .periodic_data import PeriodicData
+from .state_space_models import LinearStateSpace
 
 __all__ = [
     "LPV_MAX_PARAMETERS",

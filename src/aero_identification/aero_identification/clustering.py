@@ -17,7 +17,7 @@ from sklearn.cluster import KMeans
 from sklearn.metrics import silhouette_score
 
 from aero_identification.bla import weak_lines
-from aero_identification.data import PeriodicData
+from aero_identification.periodic_data import PeriodicData
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 
 from .bla import bla_levels_db
-from .config import IdentificationConfig
 from .dataset import Dataset
 from .estimation_sets import estimation_sets, validation_realization
-from .level_models import kept_periods
+from .hyperparameters import IdentificationConfig
+from .identification_result import IdentificationResult, Log
+from .level_identification import kept_periods
 from .metrics import relative_rms_error, steady_state_response
-from .results import IdentificationResult, Log
 from .warm_up import warm_up
 
 __all__ = [

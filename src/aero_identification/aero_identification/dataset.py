@@ -3,7 +3,7 @@
 A source adapter turns its data into a `Dataset` (docs/design.md §7.1):
 
 - a campaign stream (the identifier node's `CampaignAssembler`, or a bag read back into one):
-  `campaign_dataset.campaign_dataset`;
+  `campaign_source.campaign_dataset`;
 - measured CSV/MAT records: `records.read_dataset`.
 
 `pipeline.identify(dataset, config)` then runs every stage that the data allow, and
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from aero_identification.data import PeriodicData
+from aero_identification.periodic_data import PeriodicData
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,7 +153,7 @@ class Dataset:
         sines: valid single-sine records (empty for records).
         sines_planned: the source plans sine records (a campaign), so the level-1 models of
             Table 1's paper variant are fitted even before the first sine arrives.
-        quality: the data-quality account (campaign_dataset.data_quality, or the records'
+        quality: the data-quality account (campaign_source.data_quality, or the records'
             reading account); ``clean`` false when anything was lost or excluded.
         excluded_sines: sine records left out, each with its reason.
         warnings: what the adapter noticed (a transient, a sine not used), for the report.

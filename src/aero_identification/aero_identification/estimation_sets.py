@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import IdentificationConfig
-from .data import PeriodicData
-from .level_models import kept_periods
-from .results import IdentificationResult, LevelResult
+from .hyperparameters import IdentificationConfig
+from .identification_result import IdentificationResult, LevelResult
+from .level_identification import kept_periods
+from .periodic_data import PeriodicData
 
 __all__ = [
     "EstimationSets",

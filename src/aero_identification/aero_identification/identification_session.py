@@ -32,9 +32,9 @@ from multisine_gen.revision import PlanRequest
 from rig_runtime.anomaly import Anomaly
 from rig_runtime.interface import EXPERIMENT_PLAN, PITCH_STATE, WING_COEFFICIENTS
 
-from . import adaptive, model_message, refit_worker
-from .campaign_dataset import level_so_far
-from .config import IdentificationConfig
+from . import adaptive, model_payload, refit_worker
+from .campaign_source import level_so_far
+from .hyperparameters import IdentificationConfig
 from .identifier_settings import IdentifierSettings
 from .period_assembly import CampaignAssembler
 from .quality import data_quality_lines
@@ -541,7 +541,7 @@ class IdentificationSession:
         self.refit_times.append(elapsed)
         self.last_summary = summary
         refit_worker.release_memory()  # the pickled job and its answer
-        payload[model_message.REFIT] = self.refits
+        payload[model_payload.REFIT] = self.refits
         payload["refit_s"] = elapsed
         payload["reason"] = job.reason
         self.outputs.publish_model(payload)

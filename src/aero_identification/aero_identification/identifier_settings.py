@@ -14,11 +14,11 @@ from rig_runtime.params import Parameter
 
 from . import adaptive
 from .adaptive import AdaptiveRules
-from .config import IdentificationConfig, config_from_parameters, config_parameters
+from .hyperparameters import IdentificationConfig, config_from_parameters, config_parameters
 
 PARAMETERS = [
     Parameter("output_dir", "", "run directory for models.json and the report ('' = none)"),
-    # The identification hyperparameters, declared with their ranges in config.py.
+    # The identification hyperparameters, declared with their ranges in hyperparameters.py.
     *config_parameters(),
     # Adaptive runs: the switch and the rules' thresholds, declared in adaptive.py.
     *adaptive.PARAMETERS,

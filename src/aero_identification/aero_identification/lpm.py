@@ -25,8 +25,8 @@ import numpy as np
 class LPMResult:
     """Transient-corrected period-mean spectra with their noise (co)variances.
 
-    All spectra are on the per-period 1/√N DFT scale of data.py, i.e. comparable with the mean
-    over periods of PeriodicData.U / .Y; variances are of that period mean.
+    All spectra are on the per-period 1/√N DFT scale of periodic_data.py, i.e. comparable with
+    the mean over periods of PeriodicData.U / .Y; variances are of that period mean.
 
     Attributes:
         lines: (L,) per-period DFT bin indices at which the LPM was evaluated.

@@ -3,11 +3,11 @@
 
 Every stage runs that the data allow, each in its own module:
 
-1. level_models.py: per level, k-means clustering of the periods (the dominant cluster is
+1. level_identification.py: per level, k-means clustering of the periods (the dominant cluster is
    kept; needs ≥ 3 periods) and the BLA over the kept periods: the robust method with noise
    and nonlinear distortion levels when the level has M ≥ 2 realizations, the Local Polynomial
    Method with M = 1 (the distortion level then cannot be separated);
-2. level_models.py: per level, a linear state-space model of its BLA, at ``config.nx`` or,
+2. level_identification.py: per level, a linear state-space model of its BLA, at ``config.nx`` or,
    with nx = 0, at the order the subspace order scan selects (1 … ``config.max_order``);
 3. pnlss_training.py: one PNLSS model over every estimation level ("all levels";
    [PitchingWing] §4.1), started from the lowest level's linear model, trained on one mean
@@ -61,10 +61,18 @@ from .clustering_ablation import (
     run_ablation,
     start_ablation,
 )
-from .config import IdentificationConfig
 from .dataset import Dataset
 from .estimation_sets import EstimationSets, ready_levels
-from .level_models import level_models
+from .hyperparameters import IdentificationConfig
+from .identification_result import (
+    SELECTED_LPV,
+    SELECTED_PNLSS,
+    IdentificationResult,
+    LevelResult,
+    Log,
+    pnlss_structure,
+)
+from .level_identification import level_models
 from .pnlss import one_blas_thread
 from .pnlss_training import (
     MAX_JACOBIAN_BYTES,
@@ -73,14 +81,6 @@ from .pnlss_training import (
     jacobian_bytes,
     level_signature,
     scan_levels,
-)
-from .results import (
-    SELECTED_LPV,
-    SELECTED_PNLSS,
-    IdentificationResult,
-    LevelResult,
-    Log,
-    pnlss_structure,
 )
 from .scan import periodic_error
 from .validation import validate
@@ -113,7 +113,7 @@ def identify(
     """Run every stage the dataset allows (partial results from a partial stream).
 
     Args:
-        dataset: from a source adapter (campaign_dataset, records.read_dataset).
+        dataset: from a source adapter (campaign_source.campaign_dataset, records.read_dataset).
         config: hyperparameters (default: IdentificationConfig()).
         final: the final identification (the structure scan and the clustering ablation run
             only then; a sine record still streaming is no fault before it).

@@ -2,7 +2,7 @@
 
 The model (Paduart et al., "Identification of nonlinear systems using polynomial nonlinear state
 space models", Automatica 46(4) 2010), its monomials, normalised coordinates and operating point
-are described in models.py (PNLSSModel).
+are described in state_space_models.py (PNLSSModel).
 
 Fit (Paduart 2010; the PNLSS toolbox's weighted Levenberg–Marquardt):
 
@@ -33,15 +33,20 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.linalg
 
-from aero_identification.data import PeriodicData
-from aero_identification.models import STATE_BOUND, LinearStateSpace, LMIteration, PNLSSModel
 from aero_identification.monomials import (
     STRUCTURES,
     check_degrees,
     evaluate_monomials,
     structure_exponents,
 )
+from aero_identification.periodic_data import PeriodicData
 from aero_identification.pnlss_kernels import bounded_records, jacobian_records, simulate_records
+from aero_identification.state_space_models import (
+    STATE_BOUND,
+    LinearStateSpace,
+    LMIteration,
+    PNLSSModel,
+)
 
 # Where the monomials enter (Paduart et al. 2010, eq. 2): the state equation only (E), or the
 # state and the output equation (E and F).

@@ -8,15 +8,15 @@ from typing import Any
 
 import numpy as np
 
-from .config import IdentificationConfig
-from .data import PeriodicData
 from .estimation_sets import EstimationSets, validation_realization
-from .level_models import kept_periods
-from .models import PNLSSModel
+from .hyperparameters import IdentificationConfig
+from .identification_result import IdentificationResult, LevelResult, Log
+from .level_identification import kept_periods
 from .monomials import structure_exponents
+from .periodic_data import PeriodicData
 from .pnlss import PnlssSettings, fit_pnlss, output_equation_start
-from .results import IdentificationResult, LevelResult, Log
 from .scan import ScanResult, scan_pnlss
+from .state_space_models import PNLSSModel
 from .subspace import fit_linear_ss
 
 __all__ = [

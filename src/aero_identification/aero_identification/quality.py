@@ -1,5 +1,5 @@
 """Data quality: the lines that say what the identification could not use, and why (the
-account itself comes from the source adapter: campaign_dataset.data_quality, records).
+account itself comes from the source adapter: campaign_source.data_quality, records).
 
 Light (no numerical stack): the identifier node and the command line read these records too.
 """

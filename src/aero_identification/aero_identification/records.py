@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from aero_identification.data import PeriodicData, transient_periods
 from aero_identification.dataset import Dataset, LevelRecord
+from aero_identification.periodic_data import PeriodicData, transient_periods
 
 FORMATS = ("csv", "mat")
 FS_NAMES = ("fs", "Fs", "FS")
@@ -496,7 +496,7 @@ def records_dataset(records: Sequence[LevelRecord], source: str = "") -> Dataset
     """The CSV/MAT source: level records as a `Dataset`, lowest input RMS first, with the
     reading account as its data quality (the reader refuses what it cannot read whole, so a
     dataset of records is clean) and a warning per level whose first periods look transient
-    (`data.transient_periods`: reported, nothing dropped unless asked)."""
+    (`periodic_data.transient_periods`: reported, nothing dropped unless asked)."""
     levels = sorted(records, key=lambda r: r.input_rms)
     warnings = []
     for rec in levels:

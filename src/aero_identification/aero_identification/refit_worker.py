@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .config import IdentificationConfig
+from .hyperparameters import IdentificationConfig
 from .period_assembly import CampaignAssembler
 
 _kept: dict[str, Any] = {}  # "last": the latest IdentificationResult of this process
@@ -105,10 +105,10 @@ def refit(
     Returns:
         (payload, summary): the /identification/model payload (pipeline's ``to_json_dict``)
         and {complete, warnings, levels: [{name, clusters: [k, sizes] | None, excluded}],
-        written (report files), data_quality (campaign_dataset.data_quality), timings_s,
+        written (report files), data_quality (campaign_source.data_quality), timings_s,
         worker: {cpu_s, start_mb, peak_mb}}.
     """
-    from .campaign_dataset import campaign_dataset
+    from .campaign_source import campaign_dataset
     from .pipeline import identify
     from .report import write_report
 

@@ -1,5 +1,5 @@
 """Reports of an identification run: the figures of the paper's Figs. 6–9 and `write_report`,
-the one report of every source (tables in tables.py).
+the one report of every source (tables in report_tables.py).
 
 Figures use matplotlib's object-oriented API on an Agg canvas (no pyplot, no screen, no global
 backend switch), so they can be written from nodes and tests alike.
@@ -14,12 +14,16 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from aero_identification import model_message as msg
+from aero_identification import model_payload as msg
 from aero_identification.bla import BLA
 from aero_identification.dataset import QuasiStaticSweep
+from aero_identification.identification_result import (
+    IdentificationResult,
+    bla_summary,
+    modal_frequencies,
+)
 from aero_identification.quality import data_quality_lines
-from aero_identification.results import IdentificationResult, bla_summary, modal_frequencies
-from aero_identification.tables import TABLE1_MODELS, clustering_markdown, table1
+from aero_identification.report_tables import TABLE1_MODELS, clustering_markdown, table1
 
 __all__ = ["TABLE1_MODELS", "clustering_markdown", "table1"]
 

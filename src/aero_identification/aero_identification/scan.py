@@ -55,11 +55,11 @@ from typing import Any
 
 import numpy as np
 
-from .data import PeriodicData
 from .metrics import steady_state_response
-from .models import LinearStateSpace, PNLSSModel
 from .monomials import STRUCTURES, check_degrees
+from .periodic_data import PeriodicData
 from .pnlss import EQUATIONS, PnlssSettings, fit_pnlss, output_equation_start, stress_periods
+from .state_space_models import LinearStateSpace, PNLSSModel
 
 __all__ = [
     "Candidate",

@@ -18,9 +18,10 @@ Models returned are always stable (all eigenvalues of A inside the unit circle):
 eigenvalues of a candidate are reflected into the unit circle (z ↦ 1/z̄, which keeps the
 magnitude response shape) and B, D re-fitted; a refinement that ends unstable is discarded.
 
-The model itself (LinearStateSpace) and its operating-point convention are in models.py. A BLA
-carries no DC information, so `fit_linear_ss` returns u_mean = y_mean = 0; set them from the
-training data with `with_operating_point` before simulating absolute signals.
+The model itself (LinearStateSpace) and its operating-point convention are in
+state_space_models.py. A BLA carries no DC information, so `fit_linear_ss` returns
+u_mean = y_mean = 0; set them from the training data with `with_operating_point` before
+simulating absolute signals.
 """
 
 import math
@@ -30,7 +31,7 @@ import scipy.linalg
 import scipy.optimize
 
 from aero_identification.bla import BLA
-from aero_identification.models import LinearStateSpace, _frf
+from aero_identification.state_space_models import LinearStateSpace, _frf
 
 # Largest eigenvalue modulus accepted for a "stable" model; reflected/clipped poles land at or
 # below it (a pole on the unit circle would be an integrator, not identifiable from the BLA).

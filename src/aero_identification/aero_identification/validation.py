@@ -7,9 +7,9 @@ from typing import Any
 
 import numpy as np
 
-from . import model_message as msg
-from .data import PeriodicData
+from . import model_payload as msg
 from .dataset import Dataset, SineData
+from .identification_result import SELECTED_LPV, SELECTED_PNLSS, IdentificationResult, LevelResult
 from .metrics import (
     noise_floor,
     predict_bla_sine,
@@ -17,8 +17,8 @@ from .metrics import (
     relative_rms_error_spread,
     steady_state_response,
 )
-from .results import SELECTED_LPV, SELECTED_PNLSS, IdentificationResult, LevelResult
-from .tables import LPV_ROW, SELECTED_ROW, SEMI_EMPIRICAL_ROW
+from .periodic_data import PeriodicData
+from .report_tables import LPV_ROW, SELECTED_ROW, SEMI_EMPIRICAL_ROW
 
 PNLSS_ROW = "PNLSS"  # Table 1's row of the PNLSS models
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from .bla import estimate_bla
 from .clustering import period_clusters
-from .data import PeriodicData, random_phase_period
+from .periodic_data import PeriodicData, random_phase_period
 from .pnlss import PnlssSettings, fit_pnlss
 from .subspace import fit_linear_ss
 

@@ -14,7 +14,7 @@ from aero_identification.adaptive import (
     Verdict,
     judge_period,
 )
-from aero_identification.data import PeriodicData
+from aero_identification.periodic_data import PeriodicData
 
 N = 256
 LINES = np.arange(1, 60, 2)

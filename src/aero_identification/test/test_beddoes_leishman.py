@@ -10,8 +10,8 @@ from aero_identification.beddoes_leishman import (
     fit_beddoes_leishman,
     static_lift,
 )
-from aero_identification.data import PeriodicData, random_phase_period
 from aero_identification.dataset import QuasiStaticSweep
+from aero_identification.periodic_data import PeriodicData, random_phase_period
 
 FS = 200.0
 SLOPE, ALPHA0 = 0.104, -0.5  # C_lα [1/°], zero-lift angle [°]

@@ -5,8 +5,8 @@ import pytest
 from scipy.signal import freqz, lfilter
 
 from aero_identification import PeriodicData, estimate_bla
-from aero_identification.data import random_phase_period
 from aero_identification.lpm import lpm_periodic
+from aero_identification.periodic_data import random_phase_period
 
 N, P = 256, 4
 FS = 100.0

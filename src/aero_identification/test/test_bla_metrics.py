@@ -11,8 +11,8 @@ from aero_identification import (
     predict_bla_sine,
     relative_rms_error,
 )
-from aero_identification.data import random_phase_period
 from aero_identification.metrics import interpolate_frf
+from aero_identification.periodic_data import random_phase_period
 
 FS = 200.0
 N, P, M = 1000, 3, 4  # 0.2 Hz resolution, odd lines 0.2 … 7.8 Hz

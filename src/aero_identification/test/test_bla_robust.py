@@ -8,7 +8,7 @@ from scipy.signal import freqz, lfilter
 
 from aero_identification import BLA, PeriodicData, estimate_bla
 from aero_identification.bla import detection_lines
-from aero_identification.data import random_phase_period
+from aero_identification.periodic_data import random_phase_period
 
 N, P, M = 512, 4, 8
 FS = 200.0

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from aero_identification.bootstrap import replicate_spreads, resample_periods
-from aero_identification.data import PeriodicData
-from aero_identification.results import EstimationSpread
+from aero_identification.identification_result import EstimationSpread
+from aero_identification.periodic_data import PeriodicData
 
 
 def _data(P: int = 6, M: int = 2, N: int = 8) -> PeriodicData:

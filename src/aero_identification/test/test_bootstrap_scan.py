@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 
 from aero_identification import pnlss_training
-from aero_identification.config import IdentificationConfig
-from aero_identification.data import PeriodicData, random_phase_period
 from aero_identification.dataset import Dataset, LevelRecord, SineData
+from aero_identification.hyperparameters import IdentificationConfig
+from aero_identification.periodic_data import PeriodicData, random_phase_period
 from aero_identification.pipeline import identify
 
 N, P, M = 256, 4, 3

@@ -19,9 +19,9 @@ from aero_identification.bspline_lpv import (
     scan_bspline_lpv,
     state_exponents,
 )
-from aero_identification.data import PeriodicData, random_phase_period
-from aero_identification.models import LinearStateSpace
+from aero_identification.periodic_data import PeriodicData, random_phase_period
 from aero_identification.scan import periodic_error
+from aero_identification.state_space_models import LinearStateSpace
 
 FS = 100.0
 

@@ -4,7 +4,7 @@ import numpy as np
 
 from aero_identification import PeriodicData, cluster_periods
 from aero_identification.clustering import common_regime, period_clusters, residual_features
-from aero_identification.data import random_phase_period
+from aero_identification.periodic_data import random_phase_period
 
 N = 400
 

@@ -5,7 +5,7 @@ import pytest
 from scipy.signal import lfilter
 
 from aero_identification import PeriodicData, transient_periods
-from aero_identification.data import random_phase_period, transient_ratio
+from aero_identification.periodic_data import random_phase_period, transient_ratio
 
 
 def test_shape_and_line_errors_say_what_is_wrong() -> None:

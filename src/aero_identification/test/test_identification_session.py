@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from aero_identification import refit_worker
-from aero_identification.campaign_dataset import level_so_far
+from aero_identification.campaign_source import level_so_far
 from aero_identification.identification_session import (
     MAX_LOGGED_GAPS,
     IdentificationSession,

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from aero_identification import pnlss_training
-from aero_identification.config import IdentificationConfig
-from aero_identification.data import PeriodicData, random_phase_period
 from aero_identification.dataset import Dataset, LevelRecord
 from aero_identification.estimation_sets import estimation_sets
+from aero_identification.hyperparameters import IdentificationConfig
+from aero_identification.identification_result import LevelResult
+from aero_identification.periodic_data import PeriodicData, random_phase_period
 from aero_identification.pipeline import identify
 from aero_identification.pnlss_training import level_weights, noise_variance
-from aero_identification.results import LevelResult
 
 N, P, M = 64, 5, 3
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from aero_identification.bla import BLA
-from aero_identification.data import PeriodicData
-from aero_identification.models import STATE_BOUND, LinearStateSpace, PNLSSModel
+from aero_identification.periodic_data import PeriodicData
 from aero_identification.pnlss import PnlssSettings, fit_pnlss
+from aero_identification.state_space_models import STATE_BOUND, LinearStateSpace, PNLSSModel
 from aero_identification.subspace import fit_linear_ss
 
 N = 1024  # samples per period

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from aero_identification import scan_pnlss
-from aero_identification.data import PeriodicData
+from aero_identification.periodic_data import PeriodicData
 from aero_identification.scan import (
     ScanRow,
     candidate_grid,
@@ -188,7 +188,7 @@ import sys
 sys.path.insert(0, {test_dir!r})
 from test_pnlss_duffing import LINES, make_case
 from aero_identification import scan_pnlss
-from aero_identification.data import PeriodicData
+from aero_identification.periodic_data import PeriodicData
 
 d = make_case(k3=1.0, seed=1).data
 train = PeriodicData(d.u[:, :, :1], d.y[:, :, :1], d.fs, LINES)

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aero_identification.campaign_dataset import campaign_dataset
+from aero_identification.campaign_source import campaign_dataset
 from aero_identification.dataset import QuasiStaticSweep
+from aero_identification.identification_result import IdentificationResult, quasi_static_json
 from aero_identification.period_assembly import CampaignAssembler
 from aero_identification.report import plot_quasi_static
-from aero_identification.results import IdentificationResult, quasi_static_json
 from multisine_gen.campaigns import build_plan
 from multisine_gen.plan import BaselineSweep, ExperimentPlan
 
@@ -98,7 +98,7 @@ def test_no_sweep_without_a_baseline_and_fig5_is_drawn(tmp_path: Path) -> None:
     )
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 20_000
     # The report draws it when the result carries a sweep.
-    from aero_identification.config import IdentificationConfig
+    from aero_identification.hyperparameters import IdentificationConfig
     from aero_identification.report import write_report
 
     result = IdentificationResult(config=IdentificationConfig(), fs=200.0, quasi_static=sweep)

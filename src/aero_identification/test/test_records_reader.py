@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from aero_identification.data import random_phase_period
+from aero_identification.periodic_data import random_phase_period
 from aero_identification.records import (
     MissingColumnError,
     NonFiniteError,

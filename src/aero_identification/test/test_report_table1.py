@@ -19,8 +19,9 @@ from aero_identification import (
     relative_rms_error,
     relative_rms_error_spread,
 )
-from aero_identification.data import random_phase_period
 from aero_identification.dataset import LevelRecord
+from aero_identification.identification_result import LevelResult
+from aero_identification.periodic_data import random_phase_period
 from aero_identification.report import (
     plot_cl_alpha,
     plot_clusters,
@@ -29,7 +30,6 @@ from aero_identification.report import (
     plot_time_series,
     table1,
 )
-from aero_identification.results import LevelResult
 
 LEVELS = ["low", "medium", "high"]
 FREQS = [0.4, 1.0, 1.6]

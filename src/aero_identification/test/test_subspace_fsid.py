@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from aero_identification.bla import BLA
-from aero_identification.models import LinearStateSpace
+from aero_identification.state_space_models import LinearStateSpace
 from aero_identification.subspace import (
     fit_linear_ss,
     smooth_variance,

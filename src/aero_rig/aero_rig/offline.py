@@ -16,12 +16,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from aero_identification.campaign_dataset import campaign_dataset
-from aero_identification.config import IdentificationConfig
+from aero_identification.campaign_source import campaign_dataset
+from aero_identification.hyperparameters import IdentificationConfig
+from aero_identification.identification_result import IdentificationResult
 from aero_identification.period_assembly import CampaignAssembler
 from aero_identification.pipeline import identify
 from aero_identification.report import write_report
-from aero_identification.results import IdentificationResult
 from multisine_gen.plan import ExperimentPlan, PlanError
 from multisine_gen.plan_format import read_plan_message
 from rig_runtime.anomaly import Anomaly

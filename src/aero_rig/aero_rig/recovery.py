@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from aero_identification.config import IdentificationConfig
+from aero_identification.hyperparameters import IdentificationConfig
 from rig_runtime.launcher import Launcher
 
 from .verdict import bag_problems

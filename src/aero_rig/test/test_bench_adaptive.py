@@ -1,4 +1,4 @@
-"""bench/adaptive.py reads the fit's Table 1 CSV as `tables.table1` writes it: the value, the
+"""bench/adaptive.py reads the fit's Table 1 CSV as `report_tables.table1` writes it: the value, the
 spread sqrt(std² + estimation std²) and the bootstrap mean, each from its own column (a column
 read as the wrong one would move the issue-23 comparison without any error)."""
 
@@ -9,7 +9,7 @@ from types import ModuleType
 
 import pytest
 
-from aero_identification.tables import table1
+from aero_identification.report_tables import table1
 
 BENCH = Path(__file__).resolve().parents[3] / "bench" / "adaptive.py"
 

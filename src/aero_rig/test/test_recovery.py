@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from aero_identification.config import IdentificationConfig
+from aero_identification.hyperparameters import IdentificationConfig
 from aero_rig.cli.common import config_path
 from aero_rig.recovery import identifier_config, recover_from_whole_bag, samples_missed
 from rig_runtime.graph import load_graph

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from aero_identification import model_message as mm
+from aero_identification import model_payload as mm
 from aero_rig import view as rig_view
 from aero_rig.view.readback import Rrd
-from pressure_scanner.rig_geometry import RigGeometry
 from pressure_scanner.tap_cloud import fill_cloud
 from pressure_scanner.taps import load_taps
+from pressure_scanner.wing_geometry import RigGeometry
 from rig_runtime.interface import (
     EXPERIMENT_SEGMENT,
     IDENTIFICATION_MODEL,
@@ -82,7 +82,7 @@ def model_json(refit: int, predictions: list[str], k: int) -> str:
         },
         "2": {"offset_deg": 19.9, "bla": {"freq_hz": freq[:2], "G_re": [1, 1], "G_im": [0, 0]}},
     }
-    # The pipeline's keys (model_message); BLA SS has a gap (a non-finite value), and a model
+    # The pipeline's keys (model_payload); BLA SS has a gap (a non-finite value), and a model
     # the view has no colour for is drawn as well.
     preds = [
         {

@@ -17,7 +17,7 @@ Missing taps. A tap reading that is NaN/inf, or outside the scanner's range, is 
 contour is drawn through the remaining taps. The sample stays valid only while the remaining taps
 still cover the section (`CoverageCriterion`):
   * no gap between consecutive valid points along the contour larger than `max_gap_rad` in the
-    contour parameter φ = ±arccos(1 − 2x/c) (geometry.py). With cosine-clustered taps equal
+    contour parameter φ = ±arccos(1 − 2x/c) (naca_section.py). With cosine-clustered taps equal
     steps of φ are the design spacing (0.112 rad for the 49-tap row), and a φ-gap is already
     shortest in x/c at the leading edge. Defaults: 0.35 rad (two missing taps in a row) in
     general, and `leading_edge_max_gap_rad` = 0.25 rad (one missing tap) for a gap with an end

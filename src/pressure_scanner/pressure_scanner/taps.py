@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from pressure_scanner.geometry import NACA0018_THICKNESS, contour_parameter, half_thickness
+from pressure_scanner.naca_section import NACA0018_THICKNESS, contour_parameter, half_thickness
 
 SURFACE_SIDE = {"leading_edge": 0, "upper": 1, "lower": -1}
 _PACKAGE = "pressure_scanner"
@@ -50,7 +50,7 @@ class TapLayout:
 
     @property
     def phi(self) -> np.ndarray:
-        """(n,) contour parameter φ of each tap (geometry.py)."""
+        """(n,) contour parameter φ of each tap (naca_section.py)."""
         return contour_parameter(self.x_c, self.side)
 
     @property

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pressure_scanner.geometry import half_thickness
 from pressure_scanner.integration import (
     Coverage,
     PressureIntegrator,
     integrate_pressures,
 )
+from pressure_scanner.naca_section import half_thickness
 from pressure_scanner.taps import load_taps
 
 

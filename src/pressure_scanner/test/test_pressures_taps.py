@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pressure_scanner.geometry import half_thickness
+from pressure_scanner.naca_section import half_thickness
 from pressure_scanner.taps import cosine_clustered_taps, load_taps
 
 

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from pressure_scanner.geometry import contour_parameter
 from pressure_scanner.integration import PressureIntegrator
+from pressure_scanner.naca_section import contour_parameter
 from pressure_scanner.taps import cosine_clustered_taps
 from wing_sim.panel import speed_basis
 

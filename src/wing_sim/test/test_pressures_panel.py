@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from pressure_scanner.geometry import contour_point, panel_nodes
 from pressure_scanner.integration import contour_weights
+from pressure_scanner.naca_section import contour_point, panel_nodes
 from wing_sim.panel import solve_hess_smith, speed_basis
 
 

@@ -8,7 +8,7 @@ Katz & Plotkin, Low-Speed Aerodynamics, 2nd ed. (2001), eqs. 10.21–10.22 and 1
 Potential flow with the Kutta condition is linear in the free-stream components, so the
 tangential surface speed at any angle α is V_t/U = a cos α + b sin α, where a and b are the
 solutions for the free stream along the chord (α = 0°) and normal to it (α = 90°). `SpeedBasis`
-holds a and b as cubic splines of the contour parameter φ (see geometry.py); the pressure
+holds a and b as cubic splines of the contour parameter φ (see naca_section.py); the pressure
 coefficient of the attached, inviscid flow is then Cp = 1 − (a cos α + b sin α)².
 """
 
@@ -18,7 +18,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from pressure_scanner.geometry import NACA0018_THICKNESS, panel_nodes
+from pressure_scanner.naca_section import NACA0018_THICKNESS, panel_nodes
 
 DEFAULT_PANELS = 240
 
@@ -52,7 +52,7 @@ def solve_hess_smith(x_nodes: np.ndarray, z_nodes: np.ndarray) -> PanelSolution:
     """Solve the Hess–Smith problem on a closed contour given clockwise from the trailing edge.
 
     x_nodes, z_nodes: (N+1,) panel corners in chords; the first and last node coincide at a
-    sharp trailing edge and the lower surface comes first (geometry.panel_nodes).
+    sharp trailing edge and the lower surface comes first (naca_section.panel_nodes).
     """
     x_nodes = np.asarray(x_nodes, dtype=float)
     z_nodes = np.asarray(z_nodes, dtype=float)

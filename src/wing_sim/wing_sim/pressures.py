@@ -1,8 +1,8 @@
 """Surface pressures of the simulated wing from the aero model's state (docs/plant.md §3).
 
-Cp at a surface point φ (geometry.py) is built in a "working frame" where the suction side is the
-upper surface (α_E ≥ 0; negative α_E is handled by mirroring z → −z, which swaps the surfaces
-and flips the signs of α, C_n and C_m):
+Cp at a surface point φ (naca_section.py) is built in a "working frame" where the suction side
+is the upper surface (α_E ≥ 0; negative α_E is handled by mirroring z → −z, which swaps the
+surfaces and flips the signs of α, C_n and C_m):
 
   1. Attached inviscid flow at an equivalent angle α_c (panel.py): Cp_inv = 1 − (a cos α_c +
      b sin α_c)². α_c is not α: it is solved per sample so that the fine-grid integral of the
@@ -43,8 +43,8 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from pressure_scanner.geometry import chord_station, contour_point
 from pressure_scanner.integration import contour_weights
+from pressure_scanner.naca_section import chord_station, contour_point
 from pressure_scanner.taps import TapLayout
 from wing_sim import aero
 from wing_sim.panel import speed_basis

@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
-from pressure_scanner.rig_geometry import RigGeometry
+from pressure_scanner.wing_geometry import RigGeometry
 
 
 @dataclass(frozen=True)

@@ -5,11 +5,11 @@ multisine records (CSV/MAT), one report for both.
     aero-rig fit FILE|DIR --format csv|mat --input COL --output COL --period N [--fs HZ]
                  [--levels PATTERN...] [--drop-periods K] [--realizations M] [--band F1 F2] ...
 
-The source adapter (a bag: aero_rig.offline and aero_identification.campaign_dataset; records:
+The source adapter (a bag: aero_rig.offline and aero_identification.campaign_source; records:
 aero_identification.records) yields a Dataset; aero_identification.pipeline.identify runs on
 it with the parameters below and aero_identification.report.write_report writes the report.
 The identification flags are generated from the one declaration of the parameters
-(aero_identification.config); those given on the command line are printed as overrides.
+(aero_identification.hyperparameters); those given on the command line are printed as overrides.
 """
 
 import argparse
@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from aero_identification.config import (
+from aero_identification.hyperparameters import (
     IdentificationConfig,
     add_config_arguments,
     config_from_args,
@@ -101,7 +101,7 @@ def add_parser(subparsers: Any) -> None:
         help="held-out levels, kept out of every fit and used only for validation errors "
         "(validation_errors.md|csv); default: none",
     )
-    add_config_arguments(p.add_argument_group("identification parameters (config.py)"))
+    add_config_arguments(p.add_argument_group("identification parameters (hyperparameters.py)"))
     _add_record_options(p)
     p.set_defaults(func=main)
 
@@ -204,7 +204,7 @@ def _overrides(args: argparse.Namespace, base: IdentificationConfig, where: str)
 
 
 def _load_bag(args: argparse.Namespace) -> Any:
-    from aero_identification.campaign_dataset import campaign_dataset
+    from aero_identification.campaign_source import campaign_dataset
     from aero_identification.dataset import select_levels
 
     from ..offline import read_campaign_bag, recorded_config

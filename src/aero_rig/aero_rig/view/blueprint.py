@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import rerun.blueprint as rrb
 
-from aero_identification import model_message as mm
+from aero_identification import model_payload as mm
 
 TIMELINE = "experiment_time"
 
@@ -50,7 +50,7 @@ PINK = (227, 119, 194)
 OLIVE = (188, 189, 34)
 CYAN = (23, 190, 207)
 CLUSTER_COLORS = [BLUE, ORANGE, GREEN, RED, PURPLE, BROWN, PINK]
-# The C_l–α view's series (model_message.prediction_series): the measured loop and the models
+# The C_l–α view's series (model_payload.prediction_series): the measured loop and the models
 # of validation.validate_sine; a model added later takes the first spare colour. A legend (points
 # with the series' names) stands at the top left of the view, from LEGEND_AT down.
 PREDICTION_COLORS = ((mm.MEASURED, GRAY), *mm.MODEL_COLORS.items())  # the models' as the report's

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from aero_identification import model_message as mm
+from aero_identification import model_payload as mm
 from aero_identification.quality import data_quality_lines
-from pressure_scanner.rig_geometry import RigGeometry
 from pressure_scanner.tap_cloud import read_cloud
+from pressure_scanner.wing_geometry import RigGeometry
 from rig_runtime import stamp_to_ns
 from rig_runtime.interface import (
     EXPERIMENT_SEGMENT,
@@ -391,7 +391,7 @@ class RigViewLogger:
 
     def on_model(self, msg: Any) -> None:
         """A model update: FRFs, clusters, predictions, Table 1, the summary and the data-quality
-        line. What cannot be drawn is named once on ``/events/view`` (`model_message.problems`)
+        line. What cannot be drawn is named once on ``/events/view`` (`model_payload.problems`)
         and left out; the rest is drawn."""
         self.counts["model"] += 1
         model = json_object(msg.data, IDENTIFICATION_MODEL.name)
@@ -485,7 +485,7 @@ class RigViewLogger:
         f = _float_array(bla.get(mm.FREQ_HZ))
         re, im = _float_array(bla.get(mm.G_RE)), _float_array(bla.get(mm.G_IM))
         if f.size == 0 or not f.shape == re.shape == im.shape:
-            return set()  # named by model_message.problems
+            return set()  # named by model_payload.problems
         g = re + 1j * im
         steps = np.diff(np.sort(f))
         steps = steps[steps > 0]
@@ -519,7 +519,7 @@ class RigViewLogger:
         try:
             arr = np.array(labels, dtype=np.int64)
         except (TypeError, ValueError):
-            return set(), ""  # named by model_message.problems
+            return set(), ""  # named by model_payload.problems
         if arr.ndim != 2:
             return set(), ""
         n_periods, n_real = arr.shape
@@ -587,13 +587,13 @@ class RigViewLogger:
             try:
                 alpha = _float_array(pred.get(mm.ALPHA_DEG))
             except (TypeError, ValueError):
-                continue  # named by model_message.problems
+                continue  # named by model_payload.problems
             base = f"/cl_alpha/predictions/{slug(pred.get(mm.NAME, f'prediction {i}'))}"
             for name, values in mm.prediction_series(pred):
                 try:
                     cl = _float_array(values)
                 except (TypeError, ValueError):
-                    continue  # named by model_message.problems
+                    continue  # named by model_payload.problems
                 if cl.size == 0 or cl.shape != alpha.shape:
                     continue
                 x, y = cl_alpha_to_view(alpha, cl)

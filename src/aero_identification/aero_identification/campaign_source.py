@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from .data import PeriodicData
 from .dataset import Dataset, LevelRecord, QuasiStaticSweep, SineData
 from .period_assembly import CampaignAssembler, PeriodBlock
+from .periodic_data import PeriodicData
 
 LEVEL_NAMES = {1: ["single"], 2: ["low", "high"], 3: ["low", "medium", "high"]}
 

@@ -5,7 +5,7 @@ Each field of :class:`IdentificationConfig` carries its default, description and
 parameters (:func:`config_parameters`, read back by :func:`config_from_parameters`), the
 command-line flags (:func:`add_config_arguments`, :func:`config_from_args`) and the JSON form
 (:meth:`IdentificationConfig.to_dict`, :meth:`IdentificationConfig.from_dict`). aero_rig's
-``config/identifier.yaml`` is tested equal to the defaults (test_config.py).
+``config/identifier.yaml`` is tested equal to the defaults (test_hyperparameters.py).
 
 A module of its own, standard library and ``rig_runtime.params`` only, so that the identifier
 node can hold the config without loading the numerical stack.

@@ -1,5 +1,6 @@
-"""The identification hyperparameters' one declaration (config.py) and what follows from it:
-the identifier node's parameters, aero_rig's identifier.yaml, the JSON form and the CLI flags."""
+"""The identification hyperparameters' one declaration (hyperparameters.py) and what follows
+from it: the identifier node's parameters, aero_rig's identifier.yaml, the JSON form and the CLI
+flags."""
 
 import argparse
 import dataclasses
@@ -12,7 +13,7 @@ from typing import Any
 import pytest
 import yaml
 
-from aero_identification.config import (
+from aero_identification.hyperparameters import (
     IdentificationConfig,
     add_config_arguments,
     config_from_args,
@@ -96,7 +97,7 @@ def test_identifier_yaml_holds_every_field_at_its_default() -> None:
     for f in FIELDS:
         assert section[f.name] == _parameter_form(f.default), (
             f"identifier.yaml: {f.name} = {section[f.name]!r}, the declared default "
-            f"(aero_identification/config.py) is {_parameter_form(f.default)!r}"
+            f"(aero_identification/hyperparameters.py) is {_parameter_form(f.default)!r}"
         )
     # ... and the file read as the node reads it gives the default config.
     from aero_identification.identifier_node import PARAMETERS
@@ -252,7 +253,9 @@ def _loaded(module: str, heavy: tuple[str, ...]) -> subprocess.CompletedProcess[
 
 def test_config_module_stays_light() -> None:
     """The identifier node holds the config without loading the numerical stack."""
-    result = _loaded("aero_identification.config", ("numpy", "scipy", "rclpy", "numba", "sklearn"))
+    result = _loaded(
+        "aero_identification.hyperparameters", ("numpy", "scipy", "rclpy", "numba", "sklearn")
+    )
     assert result.returncode == 0, result.stdout + result.stderr
 
 

@@ -1,6 +1,6 @@
 """The fields of the ``/identification/model`` message (and ``models.json``): one contract between
-the identification that writes them (results.py, pipeline.py, the identifier node) and the view
-and report that read them.
+the identification that writes them (identification_result.py, pipeline.py, the identifier
+node) and the view and report that read them.
 
 The message is JSON. What the view reads, by where it sits:
 

@@ -7,9 +7,9 @@ import numpy as np
 
 from .bla import estimate_bla
 from .clustering import ClusterResult, period_clusters
-from .config import IdentificationConfig
 from .dataset import LevelRecord
-from .results import LevelResult, Log
+from .hyperparameters import IdentificationConfig
+from .identification_result import LevelResult, Log
 from .subspace import fit_linear_ss
 
 __all__ = ["kept_periods", "level_models"]

@@ -9,17 +9,15 @@ from typing import Any
 
 import numpy as np
 
-from . import model_message as msg
+from . import model_payload as msg
 from .beddoes_leishman import BeddoesLeishman
 from .bla import BLA
 from .bspline_lpv import BSplineLPV, LpvScan
 from .clustering import ClusterResult
-from .config import IdentificationConfig
 from .dataset import LevelRecord, QuasiStaticSweep
-from .models import LinearStateSpace, PNLSSModel
+from .hyperparameters import IdentificationConfig
 from .quality import data_quality_note
-from .scan import ScanResult
-from .tables import (
+from .report_tables import (
     LPV_ROW,
     SELECTED_ROW,
     SEMI_EMPIRICAL_ROW,
@@ -28,6 +26,8 @@ from .tables import (
     held_out_table,
     table1,
 )
+from .scan import ScanResult
+from .state_space_models import LinearStateSpace, PNLSSModel
 
 
 @dataclass
