@@ -206,16 +206,14 @@ def test_every_plan_sample_is_accounted_for(campaign) -> None:
 def test_identifier_names_a_hole_in_the_plan_index_at_once(campaign, monkeypatch) -> None:
     """Samples a writer dropped (the identifier paused past the DDS lease) show as a gap in the
     plan index as soon as the next sample arrives: logged, and in the next status."""
-    from aero_identification.identifier_node import PARAMETERS, Identifier
-    from rig_runtime import Node
+    from aero_identification.identifier_node import IdentifierNode
     from rig_testing.processes import graph_env, join_graph
 
     join_graph(graph_env(), monkeypatch.setenv)
     plan, stamps, u, _ = campaign
-    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "use_worker:=false"])
-    ident = Identifier(node)
+    ident = IdentifierNode(["--ros-args", "-p", "use_worker:=false"])
     statuses: list[dict[str, str]] = []
-    ident.status_pub.publish = lambda msg: statuses.append(  # type: ignore[method-assign]
+    ident.status_pub.publish = lambda msg: statuses.append(
         {kv.key: kv.value for st in msg.status for kv in st.values}
     )
     try:
@@ -229,7 +227,6 @@ def test_identifier_names_a_hole_in_the_plan_index_at_once(campaign, monkeypatch
         assert "C_l gaps" not in statuses[-1]
     finally:
         ident.close()
-        node.close()
 
 
 def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -> None:
@@ -239,13 +236,11 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
     import signal
 
     from aero_identification.identification_session import PendingRefit
-    from aero_identification.identifier_node import PARAMETERS, Identifier
-    from rig_runtime import Node
+    from aero_identification.identifier_node import IdentifierNode
     from rig_testing.processes import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
-    node = Node("identifier", PARAMETERS, ["--ros-args", "-p", "max_iter:=3", *NO_SCAN])
-    ident = Identifier(node)
+    ident = IdentifierNode(["--ros-args", "-p", "max_iter:=3", *NO_SCAN])
     session = ident.session
     try:
         session.intake.assembler = _assemble(campaign)
@@ -272,7 +267,6 @@ def test_identifier_survives_its_worker_dying(campaign, monkeypatch, tmp_path) -
         assert session.last_summary is not None and session.last_summary["complete"]
     finally:
         ident.close()
-        node.close()
 
 
 def test_an_anomaly_during_the_final_identification_runs_it_again(
@@ -282,15 +276,13 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
     left out of the report the campaign ends with."""
     from types import SimpleNamespace
 
-    from aero_identification.identifier_node import PARAMETERS, Identifier
-    from rig_runtime import Node
+    from aero_identification.identifier_node import IdentifierNode
     from rig_runtime.anomaly import Anomaly
     from rig_testing.processes import graph_env, join_graph, wait_for
 
     join_graph(graph_env(), monkeypatch.setenv)
     args = ["--ros-args", "-p", "max_iter:=3", "-p", "exit_after_final:=false", *NO_SCAN]
-    node = Node("identifier", PARAMETERS, args)
-    ident = Identifier(node)
+    ident = IdentifierNode(args)
     session = ident.session
     try:
         plan, stamps = campaign[0], campaign[1]
@@ -312,7 +304,6 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
         assert not quality["clean"] and any("lift invalid" in a for a in quality["anomalies"])
     finally:
         ident.close()
-        node.close()
 
 
 def test_final_identification_by_the_structure_scan(campaign, tmp_path) -> None:

@@ -30,7 +30,11 @@ and timers. The work is identification_session.IdentificationSession's, which im
 import json
 import math
 import sys
+from collections.abc import Mapping, Sequence
 from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import String
 
 from multisine_gen.revision import PlanRequest
 from rig_runtime import Node, run_node, stamp_to_ns
@@ -48,6 +52,7 @@ from rig_runtime.interface import (
     joint_position,
 )
 from rig_runtime.params import ParameterSet
+from rig_runtime.qos_profiles import QOS_BY_NAME, topic_qos
 
 from .identification_session import IdentificationSession
 from .identifier_settings import PARAMETERS, identifier_settings
@@ -55,90 +60,89 @@ from .identifier_settings import PARAMETERS, identifier_settings
 TIMER_PERIOD_S = 0.1  # intake timer: refits start, worker results are collected
 
 
-def check_parameters(p: ParameterSet) -> None:
+def check_parameters(p: ParameterSet | Mapping[str, Any]) -> None:
     """What the identifier refuses at its start (ValueError): settings that do not make an
     identification configuration. The launchers run it before any node starts
     (rig_runtime.launcher.check_node)."""
-    identifier_settings(p.as_dict())
+    identifier_settings(p.as_dict() if isinstance(p, ParameterSet) else dict(p))
 
 
-class Identifier:
+class IdentifierNode(Node):
     """The identifier node's publishers, subscriptions and timers over its
     :class:`IdentificationSession` (which publishes through :meth:`publish_model`,
     :meth:`publish_status`, :meth:`send_request` and stops the node with :meth:`stop`)."""
 
-    def __init__(self, node: Node) -> None:
-        p = node.params
-        self.node = node
-        settings = identifier_settings(p.as_dict())
+    NODE_NAME = "identifier"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        settings = identifier_settings(self.parameter_values())
         self.control_pub = (
-            node.create_publisher(
-                EXPERIMENT_CONTROL.type, EXPERIMENT_CONTROL.name, EXPERIMENT_CONTROL.qos
-            )
+            self.create_publisher(String, EXPERIMENT_CONTROL.name, topic_qos(EXPERIMENT_CONTROL))
             if settings.adaptive
             else None
         )
+        # The session imports no ROS: it logs through the node's Python logger (forwarded to
+        # this node's rcl logger, rig_runtime.node_logging).
         self.session = IdentificationSession(
             settings,
-            node.logger,
+            self.logger,
             self,
-            max_early_samples=lambda: int(p["max_early_samples"]),
-            exit_after_final=lambda: bool(p["exit_after_final"]),
+            max_early_samples=lambda: int(self.get_parameter("max_early_samples").value),
+            exit_after_final=lambda: bool(self.get_parameter("exit_after_final").value),
         )
-        self.model_pub = node.create_publisher(
-            IDENTIFICATION_MODEL.type, IDENTIFICATION_MODEL.name, IDENTIFICATION_MODEL.qos
+        self.on_shutdown(self.session.close)
+        self.model_pub = self.create_publisher(
+            String, IDENTIFICATION_MODEL.name, topic_qos(IDENTIFICATION_MODEL)
         )
-        self.status_pub = node.create_publisher(
-            IDENTIFICATION_STATUS.type, IDENTIFICATION_STATUS.name, IDENTIFICATION_STATUS.qos
+        self.status_pub = self.create_publisher(
+            DiagnosticArray, IDENTIFICATION_STATUS.name, topic_qos(IDENTIFICATION_STATUS)
         )
-        node.create_subscription(
-            EXPERIMENT_PLAN.type,
-            EXPERIMENT_PLAN.name,
-            self.on_plan,
-            EXPERIMENT_PLAN.qos,
-            required=True,
+        self.create_subscription(
+            String, EXPERIMENT_PLAN.name, self.on_plan, topic_qos(EXPERIMENT_PLAN), required=True
         )
-        node.create_subscription(
+        # The pitch and coefficients streams on the serialized path (node.py).
+        input_qos = QOS_BY_NAME[settings.input_qos]
+        depth = None if settings.input_qos == "stream" else 2000
+        self.create_subscription(
             PITCH_STATE.type,
             PITCH_STATE.name,
             self.on_state,
-            settings.input_qos,
-            depth=None if settings.input_qos == "stream" else 2000,
+            input_qos,
+            depth=depth,
             required=True,
         )
-        node.create_subscription(
+        self.create_subscription(
             WING_COEFFICIENTS.type,
             WING_COEFFICIENTS.name,
             self.on_coefficients,
-            settings.input_qos,
-            depth=None if settings.input_qos == "stream" else 2000,
+            input_qos,
+            depth=depth,
             required=True,
         )
-        node.create_subscription(
-            EXPERIMENT_SEGMENT.type,
+        self.create_subscription(
+            String,
             EXPERIMENT_SEGMENT.name,
             self.on_segment,
-            EXPERIMENT_SEGMENT.qos,
+            topic_qos(EXPERIMENT_SEGMENT),
             required=True,
         )
-        node.create_subscription(
-            EXPERIMENT_ANOMALY.type,
-            EXPERIMENT_ANOMALY.name,
-            self.on_anomaly,
-            EXPERIMENT_ANOMALY.qos,
+        self.create_subscription(
+            String, EXPERIMENT_ANOMALY.name, self.on_anomaly, topic_qos(EXPERIMENT_ANOMALY)
         )
         # A pause past the DDS lease (the node's pause watch, rig_runtime.node) is logged there
         # and goes into the next status at once; the holes it leaves follow as gaps.
-        node.on_paused(lambda _seconds: self.publish_status())
-        node.create_timer(TIMER_PERIOD_S, self.session.on_timer)
-        node.create_timer(1.0, self.publish_status)
+        self.on_paused(lambda _seconds: self.publish_status())
+        self.create_timer(TIMER_PERIOD_S, self.session.on_timer)
+        self.create_timer(1.0, self.publish_status)
         self.publish_status()
 
     # -- subscriptions --------------------------------------------------------------------
-    def on_plan(self, msg: Any) -> None:
+    def on_plan(self, msg: String) -> None:
         self.session.on_plan(msg.data)
 
-    def on_anomaly(self, msg: Any) -> None:
+    def on_anomaly(self, msg: String) -> None:
         self.session.on_anomaly(msg.data)
 
     def on_state(self, msg: Any) -> None:
@@ -149,42 +153,30 @@ class Identifier:
     def on_coefficients(self, msg: Any) -> None:
         self.session.intake.add("y", stamp_to_ns(msg.header.stamp), float(msg.vector.x))
 
-    def on_segment(self, msg: Any) -> None:
+    def on_segment(self, msg: String) -> None:
         self.session.on_segment(json.loads(msg.data))
 
     # -- what the session publishes -------------------------------------------------------
     def publish_model(self, payload: dict[str, Any]) -> None:
-        self.model_pub.publish(
-            self.node.new_message("std_msgs/msg/String", data=json.dumps(payload, allow_nan=True))
-        )
+        self.model_pub.publish(String(data=json.dumps(payload, allow_nan=True)))
 
     def send_request(self, request: PlanRequest) -> None:
         assert self.control_pub is not None  # an adaptive run's
-        self.control_pub.publish(
-            self.node.new_message(EXPERIMENT_CONTROL.type, data=request.to_json())
-        )
+        self.control_pub.publish(String(data=request.to_json()))
 
     def publish_status(self) -> None:
-        level, values = self.session.status(self.node.paused_s)
+        level, values = self.session.status(self.paused_s)
         msg = diagnostic_array(
-            self.node,
-            f"{self.node.name}: identification",
-            level,
-            values["state"],
-            "identifier",
-            values,
+            f"{self.name}: identification", level, values["state"], "identifier", values
         )
         self.status_pub.publish(msg)
 
     def stop(self, exit_code: int) -> None:
-        self.node.request_shutdown(exit_code)
-
-    def close(self) -> None:
-        self.session.close()
+        self.request_shutdown(exit_code)
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(Identifier, "identifier", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(IdentifierNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

@@ -41,10 +41,14 @@ ramps to the safe angle.
 import json
 import sys
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import String
+
+from rig_runtime import Node, Parameter, new_message, run_node, set_stamp, stamp_to_ns
 from rig_runtime.barrier import ReadinessReport, StartBarrier
 from rig_runtime.diagnostics import OK, WARN, diagnostic_array
 from rig_runtime.interface import (
@@ -59,6 +63,7 @@ from rig_runtime.interface import (
     ActuatorLimits,
 )
 from rig_runtime.params import ParameterSet
+from rig_runtime.qos_profiles import topic_qos
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 
 from .campaigns import default_plan, short_plan
@@ -140,7 +145,9 @@ def load_plan(spec: str, seed: int) -> ExperimentPlan:
     return plan_from_json(path.read_text())
 
 
-def check_parameters(p: ParameterSet) -> tuple[ActuatorLimits, Adaptation, ExperimentPlan]:
+def check_parameters(
+    p: ParameterSet | Mapping[str, Any],
+) -> tuple[ActuatorLimits, Adaptation, ExperimentPlan]:
     """What the generator refuses before it publishes anything: adaptive bounds that cannot
     hold, a plan that does not load, or one that would leave the actuator's limits (ValueError).
     The launchers run it before any node starts (rig_runtime.launcher.check_node)."""
@@ -158,10 +165,13 @@ def check_parameters(p: ParameterSet) -> tuple[ActuatorLimits, Adaptation, Exper
 DIAGNOSTICS_PERIOD_S = 1.0  # the progress heartbeat on /diagnostics
 
 
-class Generator:
-    def __init__(self, node: Node) -> None:
-        self.node = node
-        p = node.params
+class GeneratorNode(Node):
+    NODE_NAME = "generator"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
         # Refuse before publishing anything if the plan would leave the actuator's limits.
         self.limits, self.adaptation, plan = check_parameters(p)
         self.fs = plan.fs
@@ -172,14 +182,15 @@ class Generator:
         self.judged: set[int] = set()
         self.hold_since: float | None = None
         self.hold_s = PARTICIPANT_LEASE_S
-        self.cmd_pub = node.create_publisher(
-            PITCH_COMMAND.type, PITCH_COMMAND.name, PITCH_COMMAND.qos
+        # The command stream on the serialized path (node.py).
+        self.cmd_pub = self.create_publisher(
+            PITCH_COMMAND.type, PITCH_COMMAND.name, topic_qos(PITCH_COMMAND)
         )
-        self.plan_pub = node.create_publisher(
-            EXPERIMENT_PLAN.type, EXPERIMENT_PLAN.name, EXPERIMENT_PLAN.qos
+        self.plan_pub = self.create_publisher(
+            String, EXPERIMENT_PLAN.name, topic_qos(EXPERIMENT_PLAN)
         )
-        self.seg_pub = node.create_publisher(
-            EXPERIMENT_SEGMENT.type, EXPERIMENT_SEGMENT.name, EXPERIMENT_SEGMENT.qos
+        self.seg_pub = self.create_publisher(
+            String, EXPERIMENT_SEGMENT.name, topic_qos(EXPERIMENT_SEGMENT)
         )
         self.k = 0
         self.t0_ns: int | None = None
@@ -195,33 +206,29 @@ class Generator:
         self.barrier = StartBarrier(p["barrier_nodes"])
         self.barrier_checked = 0.0
         self.barrier_logged = time.monotonic()
-        if p["flow_control"]:
-            node.create_subscription(
+        if p["flow_control"]:  # the credit, on the serialized path as the stream it paces
+            self.create_subscription(
                 WING_PROGRESS.type,
                 WING_PROGRESS.name,
                 self.on_progress,
-                WING_PROGRESS.qos,
+                topic_qos(WING_PROGRESS),
                 required=True,
             )
-        node.create_subscription(
-            GRAPH_READY.type, GRAPH_READY.name, self.on_ready, GRAPH_READY.qos, depth=256
+        self.create_subscription(
+            String, GRAPH_READY.name, self.on_ready, topic_qos(GRAPH_READY), depth=256
         )
-        self.control_sub = node.create_subscription(
-            EXPERIMENT_CONTROL.type,
-            EXPERIMENT_CONTROL.name,
-            self.on_control,
-            EXPERIMENT_CONTROL.qos,
+        self.control_sub = self.create_subscription(
+            String, EXPERIMENT_CONTROL.name, self.on_control, topic_qos(EXPERIMENT_CONTROL)
         )
-        self.diag_pub = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name, DIAGNOSTICS.qos)
-        node.create_timer(0.002, self.tick)
-        node.create_timer(DIAGNOSTICS_PERIOD_S, self.publish_diagnostics)
-        node.logger.info(
-            "plan %s: %d samples (%.1f s at %g Hz), %d segments",
-            p["plan"],
-            self.total,
-            self.plan.duration_s,
-            self.fs,
-            len(self.plan.segments),
+        self.diag_pub = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS.name, topic_qos(DIAGNOSTICS)
+        )
+        self.create_timer(0.002, self.tick)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self.publish_diagnostics)
+        self.on_shutdown(self.abort_report)
+        self.get_logger().info(
+            f"plan {p['plan']}: {self.total} samples ({self.plan.duration_s:.1f} s at "
+            f"{self.fs:g} Hz), {len(self.plan.segments)} segments"
         )
 
     def _use(self, plan: ExperimentPlan) -> None:
@@ -235,17 +242,17 @@ class Generator:
     def _publish_plan(self) -> None:
         assert self.t0_ns is not None
         message = plan_message(self.plan, self.t0_ns, adaptation=self.adaptation.to_dict())
-        self.plan_pub.publish(self.node.new_message(EXPERIMENT_PLAN.type, data=message))
+        self.plan_pub.publish(String(data=message))
 
     # -- adaptive runs ------------------------------------------------------------------------
-    def on_control(self, msg: Any) -> None:
+    def on_control(self, msg: String) -> None:
         """One request of the identifier (multisine_gen.revision)."""
         record: dict[str, Any] = {"t0_ns": self.t0_ns, "at_k": self.k}
         try:
             request = request_from_json(msg.data)
         except RequestError as exc:
-            self.node.logger.error(
-                "%s: bad request ignored, the plan is unchanged: %s", EXPERIMENT_CONTROL.name, exc
+            self.get_logger().error(
+                f"{EXPERIMENT_CONTROL.name}: bad request ignored, the plan is unchanged: {exc}"
             )
             self._event(record | {"event": "refused", "request": msg.data, "why": str(exc)})
             return
@@ -253,9 +260,7 @@ class Generator:
         record["reason"] = request.reason
         if self.t0_ns is None or self.finished:
             why = "the plan has not started" if self.t0_ns is None else "the plan has ended"
-            self.node.logger.warning(
-                "refused %s on level %d: %s", request.action, request.level, why
-            )
+            self.get_logger().warning(f"refused {request.action} on level {request.level}: {why}")
             self._event(record | {"event": "refused", "why": why})
             return
         if not request.more:
@@ -267,25 +272,18 @@ class Generator:
         try:
             revision = revise(self.plan, self.k, request, self.adaptation, self.limits)
         except (RequestError, RefusedRequestError) as exc:
-            self.node.logger.warning(
-                "refused %s on level %d (%s): %s",
-                request.action,
-                request.level,
-                request.reason,
-                exc,
+            self.get_logger().warning(
+                f"refused {request.action} on level {request.level} ({request.reason}): {exc}"
             )
             self._event(record | {"event": "refused", "why": str(exc)})
             return
         self._use(revision.plan)
         self.pacer.total = self.total
         self._publish_plan()
-        self.node.logger.info(
-            "plan revision %d from sample %d%s: %s (%s)",
-            revision.plan.revision,
-            revision.from_k,
-            f", {late} samples after the judged period" if late > 0 else "",
-            revision.change,
-            request.reason,
+        after = f", {late} samples after the judged period" if late > 0 else ""
+        self.get_logger().info(
+            f"plan revision {revision.plan.revision} from sample {revision.from_k}{after}: "
+            f"{revision.change} ({request.reason})"
         )
         self._event(
             record
@@ -305,7 +303,7 @@ class Generator:
         if (
             segment is None
             or segment.kind != "multisine"
-            or not self.node.params["flow_control"]
+            or not self.pacer.flow_control
             or (k - 1) in self.judged
         ):
             self.hold_since = None
@@ -316,11 +314,9 @@ class Generator:
         if self.hold_since is None:
             self.hold_since = now
         if now - self.hold_since > self.hold_s:
-            self.node.logger.warning(
-                "no request on the period ending at sample %d within the DDS lease (%g s): "
-                "going on with the plan as it stands",
-                k - 1,
-                self.hold_s,
+            self.get_logger().warning(
+                f"no request on the period ending at sample {k - 1} within the DDS lease "
+                f"({self.hold_s:g} s): going on with the plan as it stands"
             )
             self.judged.add(k - 1)
             self.hold_since = None
@@ -333,11 +329,11 @@ class Generator:
             return
         self.pacer.credit(round((stamp_to_ns(msg.stamp) - self.t0_ns) * self.fs / 1e9))
 
-    def on_ready(self, msg: Any) -> None:
+    def on_ready(self, msg: String) -> None:
         try:
             self.barrier.update(ReadinessReport.from_json(msg.data))
         except (ValueError, KeyError) as exc:
-            self.node.logger.warning("ignored a malformed readiness report: %s", exc)
+            self.get_logger().warning(f"ignored a malformed readiness report: {exc}")
         self.barrier_checked = 0.0  # look again at the next tick
 
     def stamp_ns(self, k: int) -> int:
@@ -345,49 +341,45 @@ class Generator:
         return self.t0_ns + round(k * 1e9 / self.fs)
 
     def _event(self, payload: dict[str, Any]) -> None:
-        self.seg_pub.publish(
-            self.node.new_message(EXPERIMENT_SEGMENT.type, data=json.dumps(payload))
-        )
+        self.seg_pub.publish(String(data=json.dumps(payload)))
 
     def pending(self) -> list[str]:
         """What the start still waits for (empty: every member ready and matched)."""
-        p = self.node.params
-        waiting = self.barrier.pending(self.node.readiness_report())
+        wanted = self.get_parameter("wait_for_subscribers").value
+        waiting = self.barrier.pending(self.readiness_report())
         subscribers = self.cmd_pub.subscription_count()
-        if subscribers < p["wait_for_subscribers"]:
+        if subscribers < wanted:
             waiting.append(
-                f"{self.node.fq_name}: {subscribers} of {p['wait_for_subscribers']} subscribers "
+                f"{self.fq_name}: {subscribers} of {wanted} subscribers "
                 "on /pitch/command (is the actuator node running?)"
             )
         return waiting
 
     def _start(self) -> bool:
-        p = self.node.params
         now = time.monotonic()
         if now - self.barrier_checked < 0.02:
             return False
         self.barrier_checked = now
         waiting = self.pending()
         if waiting:
-            if now - self.created > p["start_timeout_s"]:
-                self.node.logger.error(
-                    "start barrier: not ready after %.0f s, nothing was sent: %s",
-                    p["start_timeout_s"],
-                    "; ".join(waiting),
+            timeout_s = self.get_parameter("start_timeout_s").value
+            if now - self.created > timeout_s:
+                self.get_logger().error(
+                    f"start barrier: not ready after {timeout_s:.0f} s, nothing was sent: "
+                    + "; ".join(waiting)
                 )
-                self.node.request_shutdown(1)
+                self.request_shutdown(1)
             elif now - self.barrier_logged > 5.0:
                 self.barrier_logged = now
-                self.node.logger.info("start barrier waits for: %s", "; ".join(waiting))
+                self.get_logger().info("start barrier waits for: " + "; ".join(waiting))
             return False
         self.t0_ns = time.time_ns()
         self.pacer.start(time.monotonic())
         self._publish_plan()
-        self.node.logger.info(
-            "start barrier passed after %.2f s (%d nodes ready and matched); t0 = %d ns; streaming",
-            now - self.created,
-            len(self.barrier.members),
-            self.t0_ns,
+        self.get_logger().info(
+            f"start barrier passed after {now - self.created:.2f} s "
+            f"({len(self.barrier.members)} nodes ready and matched); t0 = {self.t0_ns} ns; "
+            "streaming"
         )
         return True
 
@@ -396,7 +388,6 @@ class Generator:
             return
         if self.t0_ns is None and not self._start():
             return
-        p = self.node.params
         target = self.pacer.target(time.monotonic())
         t0_s = self.t0_ns / 1e9  # type: ignore[operator]
         while self.k < min(target, self.total):
@@ -406,7 +397,7 @@ class Generator:
             segment = self.starts.get(k)
             if segment is not None:
                 self._event(segment_event(segment, "start", t0_s, self.fs) | {"t0_ns": self.t0_ns})
-            msg = self.node.new_message(
+            msg = new_message(
                 PITCH_COMMAND.type,
                 name=[PITCH_JOINT],
                 position=[self.command_deg[k] * DEG],
@@ -429,14 +420,12 @@ class Generator:
                     "t0_ns": self.t0_ns,
                 }
             )
-            self.node.logger.info(
-                "plan finished: %d samples published (%d planned, revision %d)",
-                self.total,
-                self.planned_samples,
-                self.plan.revision,
+            self.get_logger().info(
+                f"plan finished: {self.total} samples published ({self.planned_samples} "
+                f"planned, revision {self.plan.revision})"
             )
-            if p["exit_at_end"]:
-                self.node.request_shutdown(0)
+            if self.get_parameter("exit_at_end").value:
+                self.request_shutdown(0)
 
     def stream_state(self) -> str:
         """Where the stream stands: what the campaign's liveness and ``ros2 topic echo`` see."""
@@ -462,23 +451,21 @@ class Generator:
             values["credit_until"] = self.pacer.credit_until
         level = WARN if state == "waiting for credit" else OK
         self.diag_pub.publish(
-            diagnostic_array(
-                self.node, f"{self.node.name}: stream", level, state, "generator", values
-            )
+            diagnostic_array(f"{self.name}: stream", level, state, "generator", values)
         )
 
-    def close(self) -> None:
+    def abort_report(self) -> None:
+        """At shutdown: a plan stopped before its end is reported as aborted."""
         if self.t0_ns is not None and not self.finished:
             self._event({"event": "plan_aborted", "samples": self.k, "t0_ns": self.t0_ns})
-            self.node.logger.warning(
-                "stopped at sample %d of %d; the actuator holds, then ramps to its safe angle",
-                self.k,
-                self.total,
+            self.get_logger().warning(
+                f"stopped at sample {self.k} of {self.total}; the actuator holds, then ramps to "
+                "its safe angle"
             )
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(Generator, "generator", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(GeneratorNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

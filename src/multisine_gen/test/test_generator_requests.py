@@ -5,20 +5,23 @@ the stream holds at a measured period's end until that period's request, while a
 matched. Its credit (flow control) comes from the lift's progress stamps."""
 
 import json
-import logging
+from collections.abc import Iterator
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
 
-from multisine_gen.generator_node import PARAMETERS, Generator
+from multisine_gen.generator_node import GeneratorNode
 from multisine_gen.plan_format import read_plan_message
 from multisine_gen.revision import PlanRequest
 from rig_runtime.interface import WING_COEFFICIENTS, WING_PROGRESS
 from rig_runtime.messages import new_message, set_stamp
+from rig_testing.processes import graph_env, join_graph
 
 
 class _Endpoint:
+    """What one of the node's endpoints sent, and how many peers it is told it has."""
+
     def __init__(self) -> None:
         self.sent: list[Any] = []
         self.matched = 0
@@ -26,54 +29,58 @@ class _Endpoint:
     def publish(self, msg: Any) -> None:
         self.sent.append(msg)
 
-    def subscription_count(self) -> int:
-        return 1
-
     def publisher_count(self) -> int:
         return self.matched
 
 
-class _Node:
-    """What Generator uses of rig_runtime.Node, recorded."""
+class _Recorded:
+    """A real GeneratorNode's publishers recorded instead of sent (``endpoints[topic]``), and
+    its readers' matched counts set by the test (``endpoints["sub " + topic]``)."""
 
-    fq_name = "/generator"
-
-    def __init__(self, **params: Any) -> None:
-        self.params = {p.name: p.default for p in PARAMETERS} | params
+    def __init__(self, gen: GeneratorNode) -> None:
         self.endpoints: dict[str, _Endpoint] = {}
-        self.logger = logging.getLogger("test_generator")
-
-    def create_publisher(self, type_name: str, topic: str, qos: str) -> _Endpoint:
-        return self.endpoints.setdefault(topic, _Endpoint())
-
-    def create_subscription(self, type_name: str, topic: str, *args: Any, **kw: Any) -> _Endpoint:
-        return self.endpoints.setdefault(f"sub {topic}", _Endpoint())
-
-    def create_timer(self, period_s: float, callback: Any) -> None:
-        return None
-
-    def new_message(self, type_name: str, **fields: Any) -> Any:
-        return new_message(type_name, **fields)
+        for pub in gen.rig_publishers:
+            pub.publish = self.endpoints.setdefault(pub.topic, _Endpoint()).publish  # type: ignore[method-assign]
+        for sub in gen.rig_subscriptions:
+            endpoint = self.endpoints.setdefault(f"sub {sub.topic}", _Endpoint())
+            sub.publisher_count = endpoint.publisher_count  # type: ignore[method-assign]
 
 
-def _started(**params: Any) -> tuple[Generator, _Node]:
-    node = _Node(plan="short", seed=5, flow_control=True, **params)
-    gen = Generator(node)  # type: ignore[arg-type]
+_made: list[GeneratorNode] = []
+
+
+@pytest.fixture(autouse=True)
+def _graph(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """Each node on this test's own DDS domain, closed at its end."""
+    join_graph(graph_env(), monkeypatch.setenv)
+    yield
+    while _made:
+        _made.pop().close()
+
+
+def _started(**params: Any) -> tuple[GeneratorNode, _Recorded]:
+    settings = {"plan": "short", "seed": 5, "flow_control": True} | params
+    args = ["--ros-args"]
+    for name, value in settings.items():
+        args += ["-p", f"{name}:={json.dumps(value)}"]
+    gen = GeneratorNode(args)
+    _made.append(gen)
+    node = _Recorded(gen)
     gen.t0_ns = 10**18
     gen.pacer.start(0.0)
     return gen, node
 
 
-def _events(node: _Node) -> list[dict[str, Any]]:
+def _events(node: _Recorded) -> list[dict[str, Any]]:
     return [json.loads(m.data) for m in node.endpoints["/experiment/segment"].sent]
 
 
-def _send(gen: Generator, request: PlanRequest | str) -> None:
+def _send(gen: GeneratorNode, request: PlanRequest | str) -> None:
     text = request if isinstance(request, str) else request.to_json()
     gen.on_control(SimpleNamespace(data=text))
 
 
-def _period(gen: Generator, level: int, realization: int, period: int) -> Any:
+def _period(gen: GeneratorNode, level: int, realization: int, period: int) -> Any:
     return next(
         s
         for s in gen.plan.segments
@@ -113,17 +120,17 @@ def test_a_request_carried_out_is_published_as_a_revision_with_its_decision() ->
     ],
 )
 def test_refused_and_malformed_requests_are_recorded_and_change_nothing(
-    request_text: str, why: str, caplog: pytest.LogCaptureFixture
+    request_text: str, why: str, capfd: pytest.CaptureFixture[str]
 ) -> None:
     gen, node = _started()
     gen.k = _period(gen, 1, 0, 1).start_k + 3  # the high level streams
     plan = gen.plan
-    with caplog.at_level(logging.WARNING, logger="test_generator"):
-        _send(gen, request_text)
+    _send(gen, request_text)
     assert gen.plan is plan and not node.endpoints["/experiment/plan"].sent
     event = _events(node)[-1]
     assert event["event"] == "refused" and why in event["why"]
-    assert why in caplog.text
+    logged = [line for line in capfd.readouterr().err.splitlines() if "[generator]" in line]
+    assert any(why in line and ("[WARN]" in line or "[ERROR]" in line) for line in logged)
 
 
 def test_a_request_beyond_the_budget_is_refused() -> None:

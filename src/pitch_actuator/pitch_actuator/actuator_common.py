@@ -12,6 +12,7 @@ from typing import Any
 from rig_runtime import Node, Parameter
 from rig_runtime.diagnostics import diagnostic_array
 from rig_runtime.interface import DIAGNOSTICS, PITCH_JOINT, joint_position
+from rig_runtime.qos_profiles import DEFAULT_QOS
 
 from .safety import GovernorEvent, SafetyGovernor, SafetyLimits
 
@@ -165,20 +166,24 @@ class SafetyReporter:
         self.node = node
         self.governor = governor
         self.hardware_id = hardware_id
-        self.pub = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name)
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self.pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS.name, DEFAULT_QOS)
         self.extra: dict[str, str] = {}
-        self._last_publish = 0.0
-        self._pending = False
-        node.create_timer(node.params["diagnostics_period_s"], self.publish)
+        node.create_timer(node.get_parameter("diagnostics_period_s").value, self.publish)
         node.create_timer(0.1, self._flush_events)
 
     def _flush_events(self) -> None:
         events: list[GovernorEvent] = self.governor.drain_events()
+        logger = self.node.get_logger()
         for event in events:
-            log = self.node.logger.error if event.level >= 2 else self.node.logger.warning
-            if event.level == 0:
-                log = self.node.logger.info
-            log("%s", event.message)
+            # One call per severity: rclpy refuses a call site whose severity changes.
+            if event.level >= 2:
+                logger.error(event.message)
+            elif event.level == 1:
+                logger.warning(event.message)
+            else:
+                logger.info(event.message)
         if events:
             self.publish()
 
@@ -187,7 +192,6 @@ class SafetyReporter:
         values = dict(status.values)
         values.update(self.extra)
         msg = diagnostic_array(
-            self.node,
             f"{self.node.name}: pitch actuator safety",
             int(status.level),
             status.message,

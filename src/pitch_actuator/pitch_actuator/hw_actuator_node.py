@@ -17,9 +17,12 @@ import json
 import math
 import sys
 import time
+from collections.abc import Sequence
 from typing import Any
 
-from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+from std_msgs.msg import Bool, String
+
+from rig_runtime import Node, Parameter, new_message, run_node, set_stamp, stamp_to_ns
 from rig_runtime.interface import (
     EXPERIMENT_SEGMENT,
     PITCH_COMMAND,
@@ -27,6 +30,7 @@ from rig_runtime.interface import (
     PITCH_STATE,
     PITCH_STOP,
 )
+from rig_runtime.qos_profiles import DEFAULT_QOS, QOS_BY_NAME, topic_qos
 
 from .actuator_common import (
     LIMIT_PARAMETERS,
@@ -64,10 +68,13 @@ PARAMETERS = [
 ]
 
 
-class HwActuator:
-    def __init__(self, node: Node) -> None:
-        p = node.params
-        self.node = node
+class HwActuatorNode(Node):
+    NODE_NAME = "hw_actuator"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
         self.limits = limits_from_params(p)
         self.link = ControllerLink(
             ControllerLinkConfig(
@@ -81,41 +88,42 @@ class HwActuator:
         self.t_origin = time.monotonic()
         self.governor = SafetyGovernor(self.limits, initial_deg=p["initial_deg"], t_s=0.0)
         self.sent_setpoint_deg: float | None = None
-        self.state_pub = node.create_publisher(PITCH_STATE.type, PITCH_STATE.name, p["state_qos"])
-        self.reporter = SafetyReporter(
-            node, self.governor, f"pwac://{p['controller_host']}:{p['controller_port']}"
+        self.on_shutdown(lambda: self.link.close(hold=True))
+        # The command and state streams on the serialized path (node.py).
+        self.state_pub = self.create_publisher(
+            PITCH_STATE.type, PITCH_STATE.name, QOS_BY_NAME[p["state_qos"]]
         )
-        node.create_subscription(
+        self.reporter = SafetyReporter(
+            self, self.governor, f"pwac://{p['controller_host']}:{p['controller_port']}"
+        )
+        self.create_subscription(
             PITCH_COMMAND.type,
             PITCH_COMMAND.name,
             self.on_command,
-            PITCH_COMMAND.qos,
+            topic_qos(PITCH_COMMAND),
             required=True,
         )
         # One control tick's rate budget: what a command arriving just before a tick can still
         # lag by although the setpoint follows it at the full rate.
         self.tracking = CommandTracking(
-            node, catch_up_deg=self.limits.max_rate_deg_s / p["update_rate_hz"]
+            self, catch_up_deg=self.limits.max_rate_deg_s / p["update_rate_hz"]
         )
         self.trips = 0
-        node.set_ready(
+        self.set_ready(
             False,
             f"no feedback from the position controller at "
             f"{p['controller_host']}:{p['controller_port']} yet",
         )
-        node.create_subscription(PITCH_STOP.type, PITCH_STOP.name, self.on_stop)
+        self.create_subscription(Bool, PITCH_STOP.name, self.on_stop, DEFAULT_QOS)
         # The silence after the plan's last command is its end, not a lost stream.
-        node.create_subscription(
-            EXPERIMENT_SEGMENT.type,
-            EXPERIMENT_SEGMENT.name,
-            self.on_segment,
-            EXPERIMENT_SEGMENT.qos,
+        self.create_subscription(
+            String, EXPERIMENT_SEGMENT.name, self.on_segment, topic_qos(EXPERIMENT_SEGMENT)
         )
-        node.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
-        node.create_timer(p["diagnostics_period_s"], self.update_link_diagnostics)
+        self.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
+        self.create_timer(p["diagnostics_period_s"], self.update_link_diagnostics)
         self.published = 0
-        node.logger.info(
-            "controller link %s -> %s", self.link.local_address, self.link.controller_address
+        self.get_logger().info(
+            f"controller link {self.link.local_address} -> {self.link.controller_address}"
         )
 
     def _now(self) -> float:
@@ -141,11 +149,11 @@ class HwActuator:
         )
         self._send(setpoint_deg)
 
-    def on_segment(self, msg: Any) -> None:
+    def on_segment(self, msg: String) -> None:
         if json.loads(msg.data).get("event") == "plan_end":
             self.governor.end_stream(self._now(), "the plan has ended")
 
-    def on_stop(self, msg: Any) -> None:
+    def on_stop(self, msg: Bool) -> None:
         if msg.data:
             self._send(self.governor.stop(self._now(), "stop requested on /pitch/stop"))
         else:
@@ -161,14 +169,14 @@ class HwActuator:
             self.tracking.watchdog_tripped("no pitch command within the watchdog timeout")
         for feedback in self.link.poll():
             if self.published == 0:
-                self.node.set_ready(True)
+                self.set_ready(True)
             self.publish_state(feedback)
             # After a controller-side watchdog hold only a new setpoint resumes motion.
             if feedback.status & Status.WATCHDOG and self.governor.mode.value == "tracking":
                 self.sent_setpoint_deg = None
 
     def publish_state(self, feedback: Feedback) -> None:
-        msg = self.node.new_message(
+        msg = new_message(
             PITCH_STATE.type,
             name=[PITCH_JOINT],
             position=[feedback.position_rad],
@@ -176,7 +184,7 @@ class HwActuator:
         )
         stamp = (
             feedback.stamp_ns
-            if self.node.params["stamp_source"] == "controller"
+            if self.get_parameter("stamp_source").value == "controller"
             else time.time_ns()
         )
         set_stamp(msg.header.stamp, stamp)
@@ -203,14 +211,11 @@ class HwActuator:
             }
         )
         if stats.last_feedback_age_s is None or stats.last_feedback_age_s > 0.5:
-            self.node.logger.warning("no feedback from the controller for > 0.5 s")
-
-    def close(self) -> None:
-        self.link.close(hold=True)
+            self.get_logger().warning("no feedback from the controller for > 0.5 s")
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(HwActuator, "hw_actuator", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(HwActuatorNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

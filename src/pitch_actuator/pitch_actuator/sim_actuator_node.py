@@ -23,9 +23,12 @@ import json
 import math
 import sys
 import time
+from collections.abc import Sequence
 from typing import Any
 
-from rig_runtime import Node, Parameter, run_node, set_stamp, stamp_to_ns
+from std_msgs.msg import Bool, String
+
+from rig_runtime import Node, Parameter, new_message, run_node, set_stamp, stamp_to_ns
 from rig_runtime.interface import (
     ALPHA_TRUE_JOINT,
     EXPERIMENT_SEGMENT,
@@ -34,6 +37,7 @@ from rig_runtime.interface import (
     PITCH_STATE,
     PITCH_STOP,
 )
+from rig_runtime.qos_profiles import DEFAULT_QOS, QOS_BY_NAME, topic_qos
 
 from .actuator_common import (
     LIMIT_PARAMETERS,
@@ -71,10 +75,13 @@ PARAMETERS = [
 ]
 
 
-class SimActuator:
-    def __init__(self, node: Node) -> None:
-        p = node.params
-        self.node = node
+class SimActuatorNode(Node):
+    NODE_NAME = "sim_actuator"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
         self.fs = p["fs"]
         self.limits = limits_from_params(p)
         self.model = ActuatorModel(
@@ -93,23 +100,23 @@ class SimActuator:
             seed=p["seed"],
         )
         self.governor = SafetyGovernor(self.limits, initial_deg=p["initial_deg"], t_s=0.0)
-        self.state_pub = node.create_publisher(PITCH_STATE.type, PITCH_STATE.name, p["state_qos"])
-        self.reporter = SafetyReporter(node, self.governor, "sim_actuator")
-        self.command_sub = node.create_subscription(
+        # The command and state streams on the serialized path (node.py).
+        self.state_pub = self.create_publisher(
+            PITCH_STATE.type, PITCH_STATE.name, QOS_BY_NAME[p["state_qos"]]
+        )
+        self.reporter = SafetyReporter(self, self.governor, "sim_actuator")
+        self.command_sub = self.create_subscription(
             PITCH_COMMAND.type,
             PITCH_COMMAND.name,
             self.on_command,
-            PITCH_COMMAND.qos,
+            topic_qos(PITCH_COMMAND),
             required=True,
         )
-        node.create_subscription(PITCH_STOP.type, PITCH_STOP.name, self.on_stop)
+        self.create_subscription(Bool, PITCH_STOP.name, self.on_stop, DEFAULT_QOS)
         # After the plan's end the generator may leave: running on is then the expected end of
         # the run, not an anomaly of the experiment.
-        node.create_subscription(
-            EXPERIMENT_SEGMENT.type,
-            EXPERIMENT_SEGMENT.name,
-            self.on_segment,
-            EXPERIMENT_SEGMENT.qos,
+        self.create_subscription(
+            String, EXPERIMENT_SEGMENT.name, self.on_segment, topic_qos(EXPERIMENT_SEGMENT)
         )
         self.plan_ended = False
         self.t_origin_ns: int | None = None
@@ -117,8 +124,8 @@ class SimActuator:
         self.watchdog = SilentStreamWatchdog(
             self.fs, p["stream_timeout_s"], self.limits.watchdog_timeout_s
         )
-        self.tracking = CommandTracking(node, self.fs)
-        node.create_timer(1.0 / self.fs, self.on_timer)
+        self.tracking = CommandTracking(self, self.fs)
+        self.create_timer(1.0 / self.fs, self.on_timer)
 
     def _time_s(self, stamp_ns: int) -> float:
         if self.t_origin_ns is None:
@@ -129,7 +136,7 @@ class SimActuator:
 
     def _step_and_publish(self, setpoint_rad: float, stamp_ns: int) -> None:
         sample = self.model.step(setpoint_rad)
-        msg = self.node.new_message(
+        msg = new_message(
             PITCH_STATE.type,
             name=[PITCH_JOINT, ALPHA_TRUE_JOINT],
             position=[sample.position_rad, sample.alpha_true_rad],
@@ -142,20 +149,20 @@ class SimActuator:
     def on_command(self, msg: Any) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
         if self.watchdog.command(time.monotonic()):
-            self.node.anomalies.end("free_run")
-            self.node.logger.warning("commands resumed: free run ended")
+            self.anomalies.end("free_run")
+            self.get_logger().warning("commands resumed: free run ended")
         commanded = command_position(msg)
         setpoint = self.governor.command_rad(self._time_s(stamp_ns), commanded)
         self.tracking.command(stamp_ns, math.degrees(commanded), math.degrees(setpoint))
         self._step_and_publish(setpoint, stamp_ns)
 
-    def on_segment(self, msg: Any) -> None:
+    def on_segment(self, msg: String) -> None:
         if json.loads(msg.data).get("event") == "plan_end":
             self.plan_ended = True
             # The silence after the last command is the plan's end, not a lost stream.
             self.governor.end_stream(self.governor.t_s, "the plan has ended")
 
-    def on_stop(self, msg: Any) -> None:
+    def on_stop(self, msg: Bool) -> None:
         t = self._time_s(self.last_stamp_ns or time.time_ns())
         if msg.data:
             self.governor.stop(t, "stop requested on /pitch/stop")
@@ -174,7 +181,7 @@ class SimActuator:
             return
         if self.plan_ended:
             if not self.watchdog.running_on:
-                self.node.logger.info(
+                self.get_logger().info(
                     "the plan has ended and its commands stopped: holding, then ramping to the "
                     "safe angle in real time"
                 )
@@ -192,18 +199,18 @@ class SimActuator:
                 f"({'publisher still there' if present else 'no command publisher left'}): "
                 "running on in real time (hold, then ramp to the safe angle)"
             )
-            self.node.logger.warning("%s", detail)
-            self.node.anomalies.begin("free_run", first_ns, detail)
+            self.get_logger().warning(detail)
+            self.anomalies.begin("free_run", first_ns, detail)
         for _ in range(due):
             stamp_ns = self.last_stamp_ns + round(1e9 / self.fs)
             setpoint_deg = self.governor.update(self._time_s(stamp_ns))
             self._step_and_publish(math.radians(setpoint_deg), stamp_ns)
-            self.node.anomalies.mark("free_run", stamp_ns)
+            self.anomalies.mark("free_run", stamp_ns)
             self.watchdog.stepped()
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(SimActuator, "sim_actuator", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(SimActuatorNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

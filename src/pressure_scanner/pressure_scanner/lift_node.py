@@ -16,11 +16,13 @@ takes its credit from it (multisine_gen.pacing) instead of reading every coeffic
 
 import math
 import sys
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 
-from rig_runtime import Node, Parameter, run_node, stamp_to_ns
+from rig_runtime import Node, Parameter, new_message, run_node, stamp_to_ns
 from rig_runtime.diagnostics import diagnostic_array
 from rig_runtime.interface import (
     DIAGNOSTICS,
@@ -31,12 +33,13 @@ from rig_runtime.interface import (
     WING_PROGRESS,
     joint_position,
 )
+from rig_runtime.qos_profiles import DEFAULT_QOS, QOS_BY_NAME, topic_qos
 
 from .integration import DEFAULT_SCANNER_RANGE_PA, PressureIntegrator
 from .pitch_alignment import PitchAlignment
-from .rig_geometry import RigGeometry
 from .tap_cloud import read_cloud
 from .taps import load_taps
+from .wing_geometry import RigGeometry
 
 PARAMETERS = [
     Parameter(
@@ -72,10 +75,13 @@ def gap_ns(seconds: float) -> int:
     return int(ns) if math.isfinite(ns) else 2**64
 
 
-class Lift:
-    def __init__(self, node: Node) -> None:
-        p = node.params
-        self.node = node
+class LiftNode(Node):
+    NODE_NAME = "lift"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
         self.q = p["dynamic_pressure_pa"]
         self.integrator = PressureIntegrator(
             load_taps(p["taps_file"] or None), (p["scanner_min_pa"], p["scanner_max_pa"])
@@ -85,21 +91,27 @@ class Lift:
         self.counts = {"published": 0, "invalid": 0, "alpha_missing": 0}
         self.excluded_per_tap = np.zeros(self.n_taps, dtype=np.int64)
         self.last_reason = ""
-        self.pub = node.create_publisher(WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, p["qos"])
-        self.progress_pub = node.create_publisher(
-            WING_PROGRESS.type, WING_PROGRESS.name, WING_PROGRESS.qos
+        # The sample streams (coefficients, pitch, taps) on the serialized path (node.py).
+        qos = QOS_BY_NAME[p["qos"]]
+        self.coefficients_pub = self.create_publisher(
+            WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, qos
+        )
+        # The generator's credit (multisine_gen.pacing), on the serialized path as the stream.
+        self.progress_pub = self.create_publisher(
+            WING_PROGRESS.type, WING_PROGRESS.name, topic_qos(WING_PROGRESS)
         )
         self.latest_stamp: Any = None  # of the last coefficients sample published
         self.progress_stamp: Any = None  # the last one /wing/coefficients/progress carried
-        self.diag = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name)
-        node.create_subscription(
-            PITCH_STATE.type, PITCH_STATE.name, self.on_pitch, p["qos"], required=True
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, DEFAULT_QOS)
+        self.create_subscription(
+            PITCH_STATE.type, PITCH_STATE.name, self.on_pitch, qos, required=True
         )
-        node.create_subscription(
-            PRESSURE_TAPS.type, PRESSURE_TAPS.name, self.on_taps, p["qos"], required=True
+        self.create_subscription(
+            PRESSURE_TAPS.type, PRESSURE_TAPS.name, self.on_taps, qos, required=True
         )
-        node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
-        node.create_timer(PROGRESS_PERIOD_S, self.publish_progress)
+        self.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
+        self.create_timer(PROGRESS_PERIOD_S, self.publish_progress)
+        self.on_shutdown(self.flush)
 
     def on_pitch(self, msg: Any) -> None:
         # A state without a finite pitch still takes its stamp: the taps at that stamp are
@@ -132,14 +144,14 @@ class Lift:
                 self.counts["invalid"] += 1
                 self.last_reason = c.describe(0)
         if math.isfinite(cl):
-            self.node.anomalies.clear("invalid_coefficients")
+            self.anomalies.clear("invalid_coefficients")
         else:
-            self.node.anomalies.mark("invalid_coefficients", stamp, self.last_reason)
-        out = self.node.new_message(WING_COEFFICIENTS.type)
+            self.anomalies.mark("invalid_coefficients", stamp, self.last_reason)
+        out = new_message(WING_COEFFICIENTS.type)
         out.header.stamp = msg.header.stamp
         out.header.frame_id = "wing"
         out.vector.x, out.vector.y, out.vector.z = cl, cd, cm
-        self.pub.publish(out)
+        self.coefficients_pub.publish(out)
         self.counts["published"] += 1
         self.latest_stamp = out.header.stamp
 
@@ -148,7 +160,7 @@ class Lift:
             return
         self.progress_stamp = self.latest_stamp
         self.progress_pub.publish(
-            self.node.new_message(WING_PROGRESS.type, stamp=self.latest_stamp, frame_id="wing")
+            new_message(WING_PROGRESS.type, stamp=self.latest_stamp, frame_id="wing")
         )
 
     def publish_diagnostics(self) -> None:
@@ -161,16 +173,13 @@ class Lift:
         values["excluded_taps"] = ", ".join(f"{k}: {v}" for k, v in excluded.items()) or "none"
         values["pending"] = str(self.alignment.pending_count)
         msg = diagnostic_array(
-            self.node,
-            f"{self.node.name}: pressure integration",
-            level,
-            self.last_reason or "ok",
-            "lift",
-            values,
+            f"{self.name}: pressure integration", level, self.last_reason or "ok", "lift", values
         )
-        self.diag.publish(msg)
+        self.diagnostics_pub.publish(msg)
 
-    def close(self) -> None:
+    def flush(self) -> None:
+        """At shutdown: the taps still waiting for their pitch, then the last progress and
+        diagnostics."""
         for stamp, taps, alpha in self.alignment.flush():
             self._process(stamp, taps, alpha)
         self.publish_progress()
@@ -178,7 +187,7 @@ class Lift:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(Lift, "lift", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(LiftNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

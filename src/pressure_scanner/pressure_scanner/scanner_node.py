@@ -10,17 +10,21 @@ the next ``tare_frames`` frames becomes the per-channel offset.
 """
 
 import sys
-from typing import Any
+from collections.abc import Sequence
 
-from rig_runtime import Node, Parameter, run_node, set_stamp
+from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import Bool
+
+from rig_runtime import Node, Parameter, new_message, run_node, set_stamp
 from rig_runtime.diagnostics import diagnostic_array
 from rig_runtime.interface import DIAGNOSTICS, PRESSURE_TAPS, PRESSURE_TARE
+from rig_runtime.qos_profiles import DEFAULT_QOS, QOS_BY_NAME
 
-from .rig_geometry import RigGeometry
 from .scanner_client import ScannerClient, ScannerClientConfig, TapPressures
 from .scanner_protocol import ChannelMap
 from .tap_cloud import fill_cloud, point_fields
 from .taps import load_taps
+from .wing_geometry import RigGeometry
 
 PARAMETERS = [
     Parameter("bind_host", "0.0.0.0", "interface the scanner streams to"),
@@ -40,10 +44,13 @@ PARAMETERS = [
 ]
 
 
-class Scanner:
-    def __init__(self, node: Node) -> None:
-        p = node.params
-        self.node = node
+class ScannerNode(Node):
+    NODE_NAME = "scanner"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
         taps = load_taps(p["taps_file"] or None)
         params = RigGeometry()
         self.tap_xyz = taps.xyz_m(params.chord_m, params.span_m)
@@ -57,22 +64,25 @@ class Scanner:
                 source_host=p["source_host"] or None,
             )
         )
-        self.fields = point_fields(node.new_message)
-        self.pub = node.create_publisher(PRESSURE_TAPS.type, PRESSURE_TAPS.name, p["taps_qos"])
-        self.diag = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name)
-        node.create_subscription(PRESSURE_TARE.type, PRESSURE_TARE.name, self.on_tare)
-        node.create_timer(1.0 / p["poll_rate_hz"], self.on_timer)
-        node.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
+        self.fields = point_fields(new_message)
+        # The taps stream on the serialized path (node.py).
+        self.taps_pub = self.create_publisher(
+            PRESSURE_TAPS.type, PRESSURE_TAPS.name, QOS_BY_NAME[p["taps_qos"]]
+        )
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS.name, DEFAULT_QOS)
+        self.create_subscription(Bool, PRESSURE_TARE.name, self.on_tare, DEFAULT_QOS)
+        self.create_timer(1.0 / p["poll_rate_hz"], self.on_timer)
+        self.create_timer(p["diagnostics_period_s"], self.publish_diagnostics)
         self.published = 0
         self.tare_reported = True
-        node.logger.info("listening for scanner frames on UDP port %d", self.client.port)
+        self.on_shutdown(self.client.close)
+        self.get_logger().info(f"listening for scanner frames on UDP port {self.client.port}")
 
-    def on_tare(self, msg: Any) -> None:
+    def on_tare(self, msg: Bool) -> None:
         if msg.data:
-            self.node.logger.warning(
-                "zero (tare) over %d frames: wind must be off", self.node.params["tare_frames"]
-            )
-            self.client.start_tare(self.node.params["tare_frames"])
+            frames = self.get_parameter("tare_frames").value
+            self.get_logger().warning(f"zero (tare) over {frames} frames: wind must be off")
+            self.client.start_tare(frames)
             self.tare_reported = False
 
     lost_reported = 0
@@ -89,7 +99,7 @@ class Scanner:
             lost = self.client.statistics().frames.lost
             if lost > self.lost_reported:
                 first = self.last_stamp_ns if self.last_stamp_ns is not None else frames[0].stamp_ns
-                self.node.anomalies.point(
+                self.anomalies.point(
                     "frame_loss",
                     first,
                     frames[-1].stamp_ns,
@@ -100,19 +110,17 @@ class Scanner:
         result = self.client.tare_result
         if not self.tare_reported and result is not None and not self.client.tare_in_progress:
             self.tare_reported = True
-            self.node.logger.info(
-                "tare done over %d frames; failed channels %s, suspicious %s",
-                result.n_frames,
-                list(result.failed_channels),
-                list(result.suspicious_channels),
+            self.get_logger().info(
+                f"tare done over {result.n_frames} frames; failed channels "
+                f"{list(result.failed_channels)}, suspicious {list(result.suspicious_channels)}"
             )
 
     def publish(self, frame: TapPressures) -> None:
-        cloud = self.node.new_message(PRESSURE_TAPS.type)
+        cloud = new_message(PRESSURE_TAPS.type)
         set_stamp(cloud.header.stamp, frame.stamp_ns)
         cloud.header.frame_id = "wing"
-        fill_cloud(cloud, self.node.new_message, self.tap_xyz, frame.pressures_pa, self.fields)
-        self.pub.publish(cloud)
+        fill_cloud(cloud, new_message, self.tap_xyz, frame.pressures_pa, self.fields)
+        self.taps_pub.publish(cloud)
         self.published += 1
 
     def publish_diagnostics(self) -> None:
@@ -132,21 +140,17 @@ class Scanner:
         }
         level = 1 if lost or stats.invalid_frames or stats.missing_taps else 0
         msg = diagnostic_array(
-            self.node,
-            f"{self.node.name}: pressure scanner",
+            f"{self.name}: pressure scanner",
             level,
             f"{lost} frames lost" if lost else "ok",
             f"pwsc://udp:{self.client.port}",
             values,
         )
-        self.diag.publish(msg)
-
-    def close(self) -> None:
-        self.client.close()
+        self.diagnostics_pub.publish(msg)
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(Scanner, "scanner", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(ScannerNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

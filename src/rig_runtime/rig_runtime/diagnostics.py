@@ -9,27 +9,24 @@ OK, WARN, ERROR, STALE = 0, 1, 2, 3
 
 
 def diagnostic_array(
-    node: Any,
     name: str,
     level: int,
     message: str,
     hardware_id: str,
     values: Mapping[str, object],
 ) -> Any:
-    """A DiagnosticArray with one status, stamped now (wall clock, as diagnostics are)."""
-    msg = node.new_message("diagnostic_msgs/msg/DiagnosticArray")
+    """An rclpy DiagnosticArray with one status, stamped now (wall clock, as diagnostics are)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    msg = DiagnosticArray()
     msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
     msg.status = [
-        node.new_message(
-            "diagnostic_msgs/msg/DiagnosticStatus",
-            level=int(level),
+        DiagnosticStatus(
+            level=bytes([int(level)]),
             name=name,
             message=message,
             hardware_id=hardware_id,
-            values=[
-                node.new_message("diagnostic_msgs/msg/KeyValue", key=str(k), value=str(v))
-                for k, v in values.items()
-            ],
+            values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
         )
     ]
     return msg

@@ -17,9 +17,12 @@ __all__ = [
     "CdrEndpoint",
     "CdrPublisher",
     "CdrSubscription",
+    "MessagePublisher",
+    "MessageSubscription",
     "endpoint_record",
     "message_class",
     "offered_topics",
+    "type_name_of",
 ]
 
 PROFILE_BLOCKING_S = 60  # the writers' max_blocking_time in fastdds_profiles.xml
@@ -37,6 +40,13 @@ def message_class(type_name: str) -> Any:
         raise ImportError(
             f"no Python package for {type_name} ({pkg}): {ros_environment.INSTALL_RCLPY} ({exc})"
         ) from exc
+
+
+def type_name_of(msg_class: type) -> str:
+    """The ROS type name of a generated rclpy message class (``sensor_msgs/msg/JointState``
+    for ``sensor_msgs.msg.JointState``: its module is ``sensor_msgs.msg._joint_state``)."""
+    pkg, kind = msg_class.__module__.split(".")[:2]
+    return f"{pkg}/{kind}/{msg_class.__name__}"
 
 
 @dataclass(eq=False)
@@ -106,6 +116,49 @@ class CdrSubscription(CdrEndpoint):
 
     def matched_count(self) -> int:
         return self.publisher_count()
+
+
+class MessagePublisher(CdrPublisher):
+    """An rclpy publisher of rclpy messages (a node's events, status and diagnostics, where
+    rclpy's conversion costs nothing that matters), counted and reported like the CDR ones."""
+
+    last_message: Any = None
+
+    def publish(self, msg: Any) -> None:
+        try:
+            self.handle.publish(msg)
+        except Exception as exc:  # as CdrPublisher.publish_raw
+            raise RuntimeError(f"publishing on {self.topic} failed: {exc}") from exc
+        self.count += 1
+        self.last_message = msg
+
+    def publish_raw(self, data: bytes) -> None:
+        raise TypeError(f"{self.topic}: a publisher of rclpy messages takes messages, not CDR")
+
+    @property
+    def stamp_ns(self) -> int:
+        msg = self.last_message
+        if not self.streams or msg is None:
+            return 0
+        return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+class MessageSubscription(CdrSubscription):
+    """An rclpy subscription delivering rclpy messages, counted and reported like the CDR
+    ones."""
+
+    last_message: Any = None
+
+    def took(self, msg: Any) -> None:
+        self.count += 1
+        self.last_message = msg
+
+    @property
+    def stamp_ns(self) -> int:
+        msg = self.last_message
+        if not self.streams or msg is None:
+            return 0
+        return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 def endpoint_record(entity: CdrEndpoint, kind: str, gid: str, count: int) -> Endpoint:

@@ -29,7 +29,9 @@ class FlowReport:
         if self.publisher is not None:
             return
         node = self.node
-        self.publisher = node.create_publisher(DIAGNOSTICS.type, DIAGNOSTICS.name, DIAGNOSTICS.qos)
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS.name, DIAGNOSTICS.qos)
         self.period_s = period_s
         node.create_timer(period_s, self.report)
 
@@ -37,8 +39,8 @@ class FlowReport:
         assert self.publisher is not None
         node = self.node
         self.take_undelivered()
-        endpoints = [("writer", p) for p in node.cdr_publishers] + [
-            ("reader", s) for s in node.cdr_subscriptions
+        endpoints = [("writer", p) for p in node.rig_publishers] + [
+            ("reader", s) for s in node.rig_subscriptions
         ]
         values = flow_values(
             (kind, e.topic, e.count, e.stamp_ns, e.matched_count())
@@ -46,7 +48,7 @@ class FlowReport:
             if e.streams
         )
         name = node.fq_name + FLOW_STATUS_SUFFIX
-        self.publisher.publish(diagnostic_array(node, name, OK, "", node.fq_name, values))
+        self.publisher.publish(diagnostic_array(name, OK, "", node.fq_name, values))
 
     def take_undelivered(self) -> None:
         """Take what a stream reader holds but its executor was not woken for: a reader that
@@ -59,7 +61,7 @@ class FlowReport:
         ran = now - self._tick <= 2 * self.period_s
         self._tick = now
         held_since = time.time_ns() - int(self.period_s * 1e9)
-        for sub in self.node.cdr_subscriptions:
+        for sub in self.node.rig_subscriptions:
             if not sub.streams or sub.count != sub.polled_at or not ran:
                 sub.polled_at = sub.count
                 continue

@@ -5,23 +5,27 @@
 every node of the rig needs: parameters declared once from a list of
 :class:`~rig_runtime.params.Parameter` (each an rclpy parameter with its
 ``ParameterDescriptor``), the start barrier's readiness report, the anomaly log, the pause
-watch, and typed endpoints for the interface contract's topics. A node module reads::
+watch, and every endpoint counted for the flow report and the barrier. A node module reads::
 
     PARAMETERS = [Parameter("fs", 200.0, "sample rate [Hz]", min=1.0)]
 
-    class Generator:
-        def __init__(self, node: Node) -> None:
-            self.pub = node.create_publisher(PITCH_COMMAND.type, PITCH_COMMAND.name, "stream")
-            node.create_timer(1.0 / node.params["fs"], self.tick)
+    class GeneratorNode(Node):
+        NODE_NAME = "generator"
+        PARAMETERS = PARAMETERS
+
+        def __init__(self, argv: Sequence[str] | None = None) -> None:
+            super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+            self.segment_pub = self.create_publisher(String, "/experiment/segment", EVENTS_QOS)
+            self.create_timer(1.0 / self.get_parameter("fs").value, self.tick)
 
     def main(argv=None) -> int:
-        return run_node(Generator, "generator", PARAMETERS, argv, description=__doc__)
+        return run_node(GeneratorNode, argv, description=__doc__)
 
-``create_publisher`` and ``create_subscription`` are rclpy's; given a ROS type *name* (the
+``create_publisher`` and ``create_subscription`` are rclpy's. Given a ROS type *name* (the
 interface contract's ``Topic.type``) instead of a message class, they send and take the
 serialized CDR of the runtime's messages (rosbags dataclasses with numpy sequences,
-messages.py) through rclpy's serialized publish and ``raw=True`` subscriptions. rclpy's
-message conversion is skipped where it costs the most (bench/transport.py measures it).
+messages.py) through rclpy's serialized publish and ``raw=True`` subscriptions: the sample
+streams, where rclpy's message conversion costs the most (bench/transport.py measures it).
 
 rclpy comes from the PyPI wheels (``pip install "ros-jazzy-rclpy[fastrtps]"
 ros-jazzy-common-interfaces``, CPython 3.10-3.13 on x86_64 Linux) or a sourced ROS 2 Jazzy.
@@ -32,12 +36,20 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, overload
+from typing import Any, ClassVar, overload
 
 from . import ros_environment
 from .anomaly import Anomaly, AnomalyLog
 from .barrier import Endpoint, ReadinessReport
-from .endpoints import CdrPublisher, CdrSubscription, message_class, offered_topics
+from .endpoints import (
+    CdrPublisher,
+    CdrSubscription,
+    MessagePublisher,
+    MessageSubscription,
+    message_class,
+    offered_topics,
+    type_name_of,
+)
 from .flow import FLOW_PERIOD_S
 from .flow_report import FlowReport
 from .interface import EXPERIMENT_ANOMALY
@@ -50,13 +62,11 @@ from .pause_watch import PAUSE_WATCH_S, PauseWatch
 from .qos import QosProfile, resolve_qos, to_rclpy_qos
 from .readiness import Readiness
 from .ros_environment import LAUNCHER_PID_ENV, ArgumentError
-from .spinning import Spinner
+from .spinning import Spinner, events_executor, new_context
 
 try:
-    import rclpy
     import rclpy.node
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
 except ImportError as _exc:  # the one line every graph command prints (ros_environment)
     raise ImportError(ros_environment.NO_RCLPY) from _exc
 
@@ -65,33 +75,19 @@ __all__ = ["EXECUTOR_ENV", "PAUSE_WATCH_S", "CdrPublisher", "CdrSubscription", "
 EXECUTOR_ENV = "RIG_RCLPY_EXECUTOR"
 
 
-def _events_executor(context: Any) -> Any:
-    """rclpy.experimental.EventsExecutor without its ``faulthandler.enable()``, which fails
-    where stderr has no file descriptor (pytest's capture) and is the process's business. The
-    public wrapper has no option to skip it, so the executor comes from rclpy's implementation
-    module, which that wrapper itself constructs it from."""
-    from rclpy.impl.implementation_singleton import rclpy_implementation
-
-    executor = rclpy_implementation.EventsExecutor(context)
-    context.on_shutdown(executor.wake)  # as the wrapper does: a shutdown ends a blocked spin
-    return executor
-
-
-def _new_context(domain: int) -> Any:
-    """A context per node: its own participant in ``domain``, the domain of this moment (tests
-    move between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself (an
-    orderly stop that lets the recorder drain), so rclpy installs no handler."""
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
-    return context
-
-
 class Node(rclpy.node.Node):
     """An rclpy node with validated parameters, the start barrier, anomalies and a pause watch.
 
     Each instance owns its ``rclpy.Context`` and executor (rclpy's ``EventsExecutor``;
-    ``RIG_RCLPY_EXECUTOR=single`` for its ``SingleThreadedExecutor``).
+    ``RIG_RCLPY_EXECUTOR=single`` for its ``SingleThreadedExecutor``). A node module's
+    subclass names itself and its parameter declarations for ``run_node``.
     """
+
+    NODE_NAME: ClassVar[str] = ""
+    PARAMETERS: ClassVar[Sequence[Parameter]] = ()
+    # False while rclpy's own __init__ makes its endpoints (/parameter_events): those are
+    # rclpy's, not counted or reported.
+    _counting = False
 
     def __init__(
         self,
@@ -109,7 +105,7 @@ class Node(rclpy.node.Node):
         # profile of participant_profile.py (discovery over UDP alone; writers that block up to
         # 60 s for a slow reader, fastdds_profiles.xml).
         with participant_environment():
-            context = _new_context(domain)
+            context = new_context(domain)
             try:
                 # rcl parses --ros-args (names, remaps, -p, --params-file, --log-level), per node.
                 super().__init__(
@@ -138,13 +134,14 @@ class Node(rclpy.node.Node):
         self.logger = make_logger(self.fq_name, int(self.get_logger().get_effective_level()))
         self.logger.addHandler(self._log_handler())
         executor = (
-            _events_executor(context)
+            events_executor(context)
             if choice == "events"
             else SingleThreadedExecutor(context=context)
         )
         executor.add_node(self)
-        self.cdr_publishers: list[CdrPublisher] = []
-        self.cdr_subscriptions: list[CdrSubscription] = []
+        self.rig_publishers: list[CdrPublisher] = []
+        self.rig_subscriptions: list[CdrSubscription] = []
+        self._counting = True
         self.exit_code = 0
         # Only a direct child of that launcher watches it (not a process that inherited the
         # variable further down).
@@ -158,27 +155,15 @@ class Node(rclpy.node.Node):
         self.pause_watch = PauseWatch(self)
         self._anomalies: AnomalyLog | None = None
 
-    @property
-    def middleware_description(self) -> str:
-        """``rclpy (rmw_fastrtps_cpp)``, with rmw_fastrtps's publication mode when it was
-        chosen (``rclpy (rmw_fastrtps_cpp, ASYNCHRONOUS publication)``), for the log."""
-        from rclpy.utilities import get_rmw_implementation_identifier
-
-        rmw = get_rmw_implementation_identifier()
-        mode = os.environ.get(ros_environment.PUBLICATION_MODE_ENV)
-        if mode and rmw.startswith("rmw_fastrtps"):
-            return f"rclpy ({rmw}, {mode} publication)"
-        return f"rclpy ({rmw})"
-
     def _log_handler(self) -> logging.Handler:
         handler = RosoutHandler(self.get_logger())
         handler.setFormatter(logging.Formatter("%(message)s"))
         return handler
 
     # -- publishers, subscriptions, timers: rclpy's ------------------------------------------
-    @overload
+    @overload  # type: ignore[override]
     def create_publisher(
-        self, msg_type: str, topic: str, qos_profile: str | QosProfile = ..., *,
+        self, msg_type: str, topic: str, qos_profile: Any = ..., *,
         depth: int | None = ..., **kwargs: Any,
     ) -> CdrPublisher: ...  # fmt: skip
 
@@ -186,8 +171,10 @@ class Node(rclpy.node.Node):
     def create_publisher(
         self, msg_type: type, topic: str, qos_profile: Any = ..., *,
         depth: int | None = ..., **kwargs: Any,
-    ) -> Any: ...  # fmt: skip
+    ) -> MessagePublisher: ...  # fmt: skip
 
+    # Both return the runtime's counted endpoint (endpoints.py), which wraps rclpy's Publisher
+    # or Subscription (``handle``) instead of being one: hence the override of the return type.
     def create_publisher(
         self,
         msg_type: Any,
@@ -197,27 +184,37 @@ class Node(rclpy.node.Node):
         depth: int | None = None,
         **kwargs: Any,
     ) -> Any:
-        """rclpy's ``create_publisher``; with a ROS type name (``"std_msgs/msg/String"``) and a
-        named profile (qos.py) it returns a :class:`CdrPublisher` of the runtime's messages,
-        which the start barrier reports and which lingers at ``close``. Given a message
-        class, rclpy's own publisher (not reported to the barrier)."""
-        if not isinstance(msg_type, str):
-            if depth is not None:
-                raise TypeError("depth= is for a named QoS profile; give rclpy a QoSProfile")
-            return super().create_publisher(msg_type, topic, qos_profile, **kwargs)
-        type_name = normalize_type_name(msg_type)
-        profile = resolve_qos(qos_profile, depth)
-        pub = super().create_publisher(
-            message_class(type_name), topic, to_rclpy_qos(profile), **kwargs
-        )
-        publisher = CdrPublisher(pub, str(self.resolve_topic_name(topic)), type_name, profile)
-        self.cdr_publishers.append(publisher)
-        return publisher
+        """rclpy's ``create_publisher``, counted for the flow report and reported to the start
+        barrier, and lingering at ``close`` until its samples are acknowledged.
 
-    @overload
+        ``msg_type`` is an rclpy message class (``publish`` takes its messages), or a ROS type
+        name (``"sensor_msgs/msg/JointState"``) for the serialized path: ``publish`` takes the
+        runtime's messages (messages.py) and sends their CDR bytes, which skips rclpy's
+        conversion on the sample streams (bench/transport.py). ``qos_profile``: an rclpy
+        ``QoSProfile`` (qos_profiles.py), a profile name of qos.py or a depth."""
+        if not self._counting:
+            return super().create_publisher(msg_type, topic, qos_profile, **kwargs)
+        profile = resolve_qos(qos_profile, depth)
+        if isinstance(msg_type, str):
+            type_name = normalize_type_name(msg_type)
+            pub = super().create_publisher(
+                message_class(type_name), topic, to_rclpy_qos(profile), **kwargs
+            )
+            entity: CdrPublisher = CdrPublisher(
+                pub, str(self.resolve_topic_name(topic)), type_name, profile
+            )
+        else:
+            pub = super().create_publisher(msg_type, topic, to_rclpy_qos(profile), **kwargs)
+            entity = MessagePublisher(
+                pub, str(self.resolve_topic_name(topic)), type_name_of(msg_type), profile
+            )
+        self.rig_publishers.append(entity)
+        return entity
+
+    @overload  # type: ignore[override]
     def create_subscription(
         self, msg_type: str, topic: str, callback: Callable[[Any], None],
-        qos_profile: str | QosProfile = ..., *, depth: int | None = ..., raw: bool = ...,
+        qos_profile: Any = ..., *, depth: int | None = ..., raw: bool = ...,
         required: bool = ..., **kwargs: Any,
     ) -> CdrSubscription: ...  # fmt: skip
 
@@ -226,7 +223,7 @@ class Node(rclpy.node.Node):
         self, msg_type: type, topic: str, callback: Callable[[Any], None],
         qos_profile: Any = ..., *, depth: int | None = ..., raw: bool = ...,
         required: bool = ..., **kwargs: Any,
-    ) -> Any: ...  # fmt: skip
+    ) -> MessageSubscription: ...  # fmt: skip
 
     def create_subscription(
         self,
@@ -240,21 +237,34 @@ class Node(rclpy.node.Node):
         required: bool = False,
         **kwargs: Any,
     ) -> Any:
-        """rclpy's ``create_subscription``; with a ROS type name it delivers the runtime's
-        messages decoded from the CDR bytes, or with ``raw=True`` ``(cdr_bytes,
-        receive_time_ns)`` (the recorder). ``required=True``: an input without which the
-        node cannot work; the start barrier waits until it has a publisher."""
-        if not isinstance(msg_type, str):
-            if depth is not None or required:
-                raise TypeError("depth= and required= are for endpoints by ROS type name")
-            return super().create_subscription(
-                msg_type, topic, callback, qos_profile, raw=raw, **kwargs
-            )
-        type_name = normalize_type_name(msg_type)
+        """rclpy's ``create_subscription``, counted and reported as ``create_publisher``.
+
+        With an rclpy message class the callback takes rclpy's messages; with a ROS type name,
+        the runtime's messages decoded from the CDR bytes, or with ``raw=True``
+        ``(cdr_bytes, receive_time_ns)`` (the recorder). ``required=True``: an input without
+        which the node cannot work; the start barrier waits until it has a publisher."""
+        if not self._counting:
+            return super().create_subscription(msg_type, topic, callback, qos_profile, **kwargs)
         profile = resolve_qos(qos_profile, depth)
         resolved = str(self.resolve_topic_name(topic))
         if required:
             self.readiness.required_inputs.append(resolved)
+        if not isinstance(msg_type, str):
+            if raw:
+                raise TypeError("raw=True is for endpoints by ROS type name")
+
+            def take(msg: Any) -> None:
+                self.spinner.delivered += 1
+                typed.took(msg)
+                callback(msg)
+
+            sub = super().create_subscription(
+                msg_type, topic, take, to_rclpy_qos(profile), **kwargs
+            )
+            typed = MessageSubscription(sub, resolved, type_name_of(msg_type), profile)
+            self.rig_subscriptions.append(typed)
+            return typed
+        type_name = normalize_type_name(msg_type)
 
         def deliver(data: bytes) -> None:
             self.spinner.delivered += 1
@@ -268,13 +278,17 @@ class Node(rclpy.node.Node):
             message_class(type_name), topic, deliver, to_rclpy_qos(profile), raw=True, **kwargs
         )
         subscription = CdrSubscription(sub, resolved, type_name, profile)
-        self.cdr_subscriptions.append(subscription)
+        self.rig_subscriptions.append(subscription)
         return subscription
 
     def create_timer(self, timer_period_sec: float, callback: Any, *args: Any, **kw: Any) -> Any:
         if not timer_period_sec > 0:
             raise ValueError(f"timer period must be > 0 s, got {timer_period_sec}")
         return super().create_timer(timer_period_sec, callback, *args, **kw)
+
+    def parameter_values(self) -> dict[str, Any]:
+        """The current value (rclpy's ``get_parameter``) of each parameter this node declared."""
+        return {name: self.get_parameter(name).value for name in self.params.declared}
 
     def new_message(self, type_name: str, **fields: Any) -> Any:
         """A runtime message by ROS type name (messages.py)."""

@@ -5,10 +5,10 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
+from . import ros_environment
 from .node import Node
 from .params import Parameter, ParameterError
 from .ros_environment import ArgumentError
@@ -35,51 +35,64 @@ def format_parameter_help(name: str, parameters: Sequence[Parameter], descriptio
     return "\n".join(lines)
 
 
+def middleware_description() -> str:
+    """``rclpy (rmw_fastrtps_cpp)``, with rmw_fastrtps's publication mode when it was
+    chosen (``rclpy (rmw_fastrtps_cpp, ASYNCHRONOUS publication)``), for the log."""
+    from rclpy.utilities import get_rmw_implementation_identifier
+
+    rmw = get_rmw_implementation_identifier()
+    mode = os.environ.get(ros_environment.PUBLICATION_MODE_ENV)
+    if mode and rmw.startswith("rmw_fastrtps"):
+        return f"rclpy ({rmw}, {mode} publication)"
+    return f"rclpy ({rmw})"
+
+
 def run_node(
-    factory: Callable[[Node], Any],
-    name: str,
-    parameters: Sequence[Parameter],
+    node_class: "type[Node]",
     argv: Sequence[str] | None = None,
     description: str = "",
 ) -> int:
-    """Parse arguments, validate parameters, build the node, spin until SIGINT/SIGTERM.
+    """Parse arguments, build the node (``node_class(argv)``, a :class:`Node` subclass with
+    ``NODE_NAME`` and ``PARAMETERS``), spin until SIGINT/SIGTERM, close it.
 
     Returns the process exit code: 0 on a clean stop, 2 on a configuration error (message on
     stderr naming the parameter), the node's ``exit_code`` otherwise.
     """
     args = list(sys.argv[1:] if argv is None else argv)
+    name = node_class.NODE_NAME
     if any(a in ("-h", "--help") for a in args):
-        print(format_parameter_help(name, parameters, description))
+        print(format_parameter_help(name, node_class.PARAMETERS, description))
         return 0
-    try:
-        node = Node(name, parameters, args)
-    except (ParameterError, ArgumentError) as exc:
-        print(f"[FATAL] [{name}]: {exc}", file=sys.stderr)
-        return EXIT_CONFIG_ERROR
 
-    def _stop(name: str) -> None:
+    def _stop(signal_name: str) -> None:
         if len(signalled.received) > 1:  # a terminal's Ctrl-C and ros2 launch's SIGINT: one
             return
-        node.logger.info("received %s, shutting down", name)
-        node.spinner.signal_shutdown()
+        if built:  # during construction the flag alone; read once the node is built
+            node.get_logger().info(f"received {signal_name}, shutting down")
+            node.spinner.signal_shutdown()
 
     # Stopped by a signal, the process is on its way out: a second SIGINT (Ctrl-C in the
     # terminal's process group, then ros2 launch's own) must not kill it after the stop.
     signalled = StopSignals(signal.SIGINT, signal.SIGTERM, on_signal=_stop, ignore_after=True)
     signalled.install()
+    built = False
+    # Allocated first and initialised after, so that a subclass whose own __init__ refuses its
+    # settings once the rclpy node exists can still be named by it and closed.
+    node = node_class.__new__(node_class)
     try:
         try:
-            instance = factory(node)
-        except (ParameterError, ValueError) as exc:
-            print(f"[FATAL] [{node.fq_name}]: {exc}", file=sys.stderr)
+            node.__init__(args)  # type: ignore[misc]
+        except (ParameterError, ArgumentError, ValueError) as exc:
+            started = hasattr(node, "spinner")  # Node.__init__ done: the subclass refused
+            print(f"[FATAL] [{node.fq_name if started else name}]: {exc}", file=sys.stderr)
             return EXIT_CONFIG_ERROR
-        close = getattr(instance, "close", None)
-        if callable(close):
-            node.on_shutdown(close)
+        built = True
+        if signalled:
+            node.spinner.signal_shutdown()
         node.start_flow_report()
         node.start_readiness()
         node.start_pause_watch()
-        node.logger.info("running on %s", node.middleware_description)
+        node.get_logger().info(f"running on {middleware_description()}")
         profile_dir = os.environ.get("RIG_PROFILE_DIR")
         if profile_dir:  # cProfile of the spin loop, for `python -m pstats DIR/<node>.prof`
             import cProfile
@@ -91,9 +104,12 @@ def run_node(
         else:
             node.spin()
     except Exception:
+        if not hasattr(node, "spinner"):  # rclpy's node was never made: nothing to close
+            raise
         node.logger.exception("node failed")
         node.exit_code = node.exit_code or 1
     finally:
-        node.close()
+        if hasattr(node, "spinner"):
+            node.close()
         signalled.restore()
     return node.exit_code

@@ -67,10 +67,28 @@ PROFILES: dict[str, QosProfile] = {
 }
 
 
-def resolve_qos(qos: str | QosProfile, depth: int | None = None) -> QosProfile:
-    """A profile by name (or as given), optionally with another history depth."""
+def from_rclpy_qos(qos: Any) -> QosProfile:
+    """The profile of an rclpy ``QoSProfile`` (read by its policies' names, so that this module
+    still imports without rclpy)."""
+    keep_all = getattr(qos.history, "name", "") == "KEEP_ALL"
+    return QosProfile(
+        "best_effort" if getattr(qos.reliability, "name", "") == "BEST_EFFORT" else "reliable",
+        "transient_local"
+        if getattr(qos.durability, "name", "") == "TRANSIENT_LOCAL"
+        else "volatile",
+        0 if keep_all else int(qos.depth),
+    )
+
+
+def resolve_qos(qos: Any, depth: int | None = None) -> QosProfile:
+    """A profile by name, as given, from an rclpy ``QoSProfile`` or, as rclpy takes it, a
+    history depth (reliable, volatile, keep-last); optionally with another history depth."""
     if isinstance(qos, QosProfile):
         profile = qos
+    elif isinstance(qos, int) and not isinstance(qos, bool):
+        profile = QosProfile("reliable", "volatile", max(qos, 1))
+    elif not isinstance(qos, str):
+        profile = from_rclpy_qos(qos)
     else:
         try:
             profile = PROFILES[qos]

@@ -41,11 +41,11 @@ class Readiness:
         node, fq = self.node, self.node.fq_name
         out = [
             endpoint_record(p, "writer", f"{fq}#writer{i}", p.matched_count())
-            for i, p in enumerate(node.cdr_publishers)
+            for i, p in enumerate(node.rig_publishers)
         ]
         out += [
             endpoint_record(s, "reader", f"{fq}#reader{i}", s.matched_count())
-            for i, s in enumerate(node.cdr_subscriptions)
+            for i, s in enumerate(node.rig_subscriptions)
         ]
         return out
 

@@ -12,6 +12,7 @@ bag.py).
 """
 
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -70,34 +71,40 @@ PARAMETERS = [
 ]
 
 
-class Recorder:
-    def __init__(self, node: Node) -> None:
-        output = node.params["output"]
+class RecorderNode(Node):
+    """Every reader raw (CDR bytes and receive time), written to the bag as received."""
+
+    NODE_NAME = "recorder"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
+        output = p["output"]
         if not output:
             raise ValueError("parameter 'output' is required: the bag directory to create")
-        self.node = node
-        self.wanted = [node.resolve_topic_name(t) for t in node.params["topics"]]
-        self.exclude = set(node.params["exclude"])
-        p = node.params
+        self.wanted = [self.resolve_topic_name(t) for t in p["topics"]]
+        self.exclude = set(p["exclude"])
         self.writer = BagWriter(
             Path(output),
             compression=p["compression"],
             max_bag_size=p["max_bag_size"],
             max_bag_duration_ns=round(p["max_bag_duration"] * 1e9),
         )
-        self.subscriptions: dict[str, Any] = {}
+        self.readers: dict[str, Any] = {}
+        self.on_shutdown(self.finalise)
         # The start barrier waits until each of these topics that a member publishes is recorded.
-        node.set_records(self.wanted or ["*"], sorted(self.exclude))
-        node.logger.info(
-            "recording %s to %s", ", ".join(self.wanted) or "all topics", Path(output).resolve()
+        self.set_records(self.wanted or ["*"], sorted(self.exclude))
+        self.get_logger().info(
+            f"recording {', '.join(self.wanted) or 'all topics'} to {Path(output).resolve()}"
         )
         self._discover()
-        node.create_timer(node.params["discovery_period_s"], self._discover)
-        node.create_timer(p["flush_s"], self.writer.flush)
+        self.create_timer(p["discovery_period_s"], self._discover)
+        self.create_timer(p["flush_s"], self.writer.flush)
 
     def _discover(self) -> None:
-        for topic, (type_name, offered) in self.node.topic_types().items():
-            if topic in self.subscriptions or topic in self.exclude:
+        for topic, (type_name, offered) in self.topic_types().items():
+            if topic in self.readers or topic in self.exclude:
                 continue
             if self.wanted and topic not in self.wanted:
                 continue
@@ -116,47 +123,44 @@ class Recorder:
             data, receive_ns = item
             self.writer.write(connection, receive_ns, data)
 
-        self.subscriptions[topic] = self.node.create_subscription(
+        self.readers[topic] = self.create_subscription(
             type_name, topic, on_message, qos_profile=reader_qos, raw=True
         )
-        self.node.logger.info("recording %s [%s]", topic, type_name)
+        self.get_logger().info(f"recording {topic} [{type_name}]")
 
     def _publishing(self) -> list[str]:
         """Recorded topics that still have a publisher other than this node itself (every
         node writes /graph/ready and /experiment/anomaly, the recorder too)."""
-        endpoints = self.node.readiness_report().endpoints
+        endpoints = self.readiness_report().endpoints
         writers = [e for e in endpoints if e.kind == "writer"]
         out = []
         for e in endpoints:
-            if e.kind != "reader" or e.topic not in self.subscriptions:
+            if e.kind != "reader" or e.topic not in self.readers:
                 continue
             others = e.matched_count - sum(w.topic == e.topic for w in writers)
             if others > 0:
                 out.append(e.topic)
         return out
 
-    def close(self) -> None:
+    def finalise(self) -> None:
         # Stopped together with the graph (rig-launch, ros2 launch: SIGINT to every node at
         # once): the publishers send what they still hold as they leave; record it before the
         # bag is closed, so a stopped graph loses nothing.
-        timeout = self.node.params["drain_timeout_s"]
-        if not self.node.drain(lambda: not self._publishing(), timeout):
-            self.node.logger.warning(
-                "%s still published after %.1f s: closing the bag",
-                ", ".join(self._publishing()),
-                timeout,
+        timeout = self.get_parameter("drain_timeout_s").value
+        if not self.drain(lambda: not self._publishing(), timeout):
+            self.get_logger().warning(
+                f"{', '.join(self._publishing())} still published after {timeout:.1f} s: "
+                "closing the bag"
             )
         self.writer.close()
-        self.node.logger.info(
-            "bag %s finalised: %d messages in %s",
-            self.writer.path,
-            self.writer.message_count,
-            ", ".join(self.writer.files) or "no file",
+        self.get_logger().info(
+            f"bag {self.writer.path} finalised: {self.writer.message_count} messages in "
+            f"{', '.join(self.writer.files) or 'no file'}"
         )
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(Recorder, "recorder", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(RecorderNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

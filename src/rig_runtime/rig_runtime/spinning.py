@@ -8,10 +8,13 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+
 if TYPE_CHECKING:
     from .node import Node
 
-__all__ = ["SPIN_TURN_S", "WRITER_LINGER_S", "Spinner"]
+__all__ = ["SPIN_TURN_S", "WRITER_LINGER_S", "Spinner", "events_executor", "new_context"]
 
 # spin()'s turn check: how soon a flag set by a signal handler (or a gone launcher) is read.
 SPIN_TURN_S = 0.05
@@ -19,6 +22,27 @@ SPIN_TURN_S = 0.05
 # they hold: Fast DDS deletes a writer at once, and a reader that lost the end of a burst (a
 # full receive queue, a paused process) gets its repair from that writer only.
 WRITER_LINGER_S = 1.0
+
+
+def events_executor(context: Any) -> Any:
+    """rclpy.experimental.EventsExecutor without its ``faulthandler.enable()``, which fails
+    where stderr has no file descriptor (pytest's capture) and is the process's business. The
+    public wrapper has no option to skip it, so the executor comes from rclpy's implementation
+    module, which that wrapper itself constructs it from."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    executor = rclpy_implementation.EventsExecutor(context)
+    context.on_shutdown(executor.wake)  # as the wrapper does: a shutdown ends a blocked spin
+    return executor
+
+
+def new_context(domain: int) -> Any:
+    """A context per node: its own participant in ``domain``, the domain of this moment (tests
+    move between domains), shut down with the node. run_node handles SIGINT/SIGTERM itself (an
+    orderly stop that lets the recorder drain), so rclpy installs no handler."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    return context
 
 
 class Spinner:
@@ -126,7 +150,7 @@ class Spinner:
 
         deadline = time.monotonic() + WRITER_LINGER_S
         late = []
-        for pub in self.node.cdr_publishers:
+        for pub in self.node.rig_publishers:
             # the flow report is a heartbeat: a cut-off peer need not get the last one
             if pub.profile.reliability != "reliable" or pub is self.node.flow_report.publisher:
                 continue

@@ -20,18 +20,11 @@ from rig_runtime.flow import (
     parse_flow,
 )
 from rig_runtime.interface import PITCH_STATE
-from rig_runtime.messages import new_message, set_stamp, stamp_to_ns
+from rig_runtime.messages import set_stamp, stamp_to_ns
 from rig_testing.processes import graph_env, join_graph, wait_for
 
 STATE = "/pitch/state"
 MS = 1_000_000  # ns
-
-
-class _Maker:
-    """What diagnostic_array needs of a node."""
-
-    def new_message(self, type_name: str, **fields: object) -> object:
-        return new_message(type_name, **fields)
 
 
 def _writer(stamp: int, count: int = 1) -> dict[tuple[str, str], EndpointFlow]:
@@ -65,8 +58,7 @@ def _run(watch: FlowWatch, t0: float, t1: float, writer: Stream, reader: Stream)
 def test_a_report_reads_back_from_a_diagnostic_array() -> None:
     values = flow_values([("writer", STATE, 12, 345, 4), ("reader", "/pitch/command", 3, 0, 1)])
     values["state"] = "streaming"  # other values of the status are not flow
-    msg = diagnostic_array(_Maker(), "/sim_actuator" + FLOW_STATUS_SUFFIX, OK, "", "/sim_actuator",
-                           values)  # fmt: skip
+    msg = diagnostic_array("/sim_actuator" + FLOW_STATUS_SUFFIX, OK, "", "/sim_actuator", values)
     ((node, flows),) = list(flow_reports(msg))
     assert node == "/sim_actuator"
     assert flows == {

@@ -9,6 +9,7 @@ loss and order accounting.
 
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,7 @@ from rig_runtime.interface import PITCH_JOINT
 from rig_runtime.messages import set_stamp
 from rig_runtime.node import Node
 from rig_runtime.params import Parameter
+from rig_runtime.qos_profiles import QOS_BY_NAME
 
 COMMON = [
     Parameter("topic", "/chatter", "topic name"),
@@ -79,50 +81,57 @@ def sequence_number(kind: str, msg: Any) -> int:
     return int(np.frombuffer(np.asarray(msg.data, dtype=np.uint8).tobytes(), np.float32)[3])
 
 
-class Talker:
-    def __init__(self, node: Node) -> None:
-        self.node = node
-        p = node.params
+class TalkerNode(Node):
+    """Its messages on the serialized path (node.py), as the rig's streams."""
+
+    NODE_NAME = "talker"
+    PARAMETERS = TALKER_PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.p = self.parameter_values()  # all read-only
         self.kind = p["message"]
         type_name = MESSAGE_TYPES[self.kind]
-        self.pub = node.create_publisher(type_name, p["topic"], qos_profile=p["qos"])
+        self.pub = self.create_publisher(type_name, p["topic"], QOS_BY_NAME[p["qos"]])
         self.sent = 0
         self.matched_at: float | None = None
         self.done_at: float | None = None
         period = 1.0 / p["rate_hz"] if p["rate_hz"] > 0 else 0.001
-        node.create_timer(period, self.tick)
+        self.create_timer(period, self.tick)
 
     def tick(self) -> None:
-        p = self.node.params
+        p = self.p
         if self.done_at is not None:
             if time.monotonic() - self.done_at >= p["linger_s"]:
-                self.node.request_shutdown(p["exit_code"])
+                self.request_shutdown(p["exit_code"])
             return
         if self.matched_at is None:
             if self.pub.subscription_count() < p["wait_for_subscribers"]:
                 return
             self.matched_at = time.monotonic()
-            self.node.logger.info(
-                "%d subscriber(s) matched; publishing in %g s",
-                self.pub.subscription_count(),
-                p["start_delay_s"],
+            self.get_logger().info(
+                f"{self.pub.subscription_count()} subscriber(s) matched; publishing in "
+                f"{p['start_delay_s']:g} s"
             )
         if time.monotonic() - self.matched_at < p["start_delay_s"]:
             return
         burst = 1 if p["rate_hz"] > 0 else 500
         for _ in range(burst):
-            self.pub.publish(make_message(self.node, self.kind, self.sent))
+            self.pub.publish(make_message(self, self.kind, self.sent))
             self.sent += 1
             if self.sent >= p["count"]:
-                self.node.logger.info("published %d messages", self.sent)
+                self.get_logger().info(f"published {self.sent} messages")
                 self.done_at = time.monotonic()
                 return
 
 
-class Listener:
-    def __init__(self, node: Node) -> None:
-        self.node = node
-        p = node.params
+class ListenerNode(Node):
+    NODE_NAME = "listener"
+    PARAMETERS = LISTENER_PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.p = self.parameter_values()  # all read-only
         self.kind = p["message"]
         type_name = MESSAGE_TYPES[self.kind]
         self.received = 0
@@ -130,7 +139,8 @@ class Listener:
         self.last = -1
         self.first_ns: int | None = None
         self.last_ns = 0
-        node.create_subscription(type_name, p["topic"], self.on_message, qos_profile=p["qos"])
+        self.create_subscription(type_name, p["topic"], self.on_message, QOS_BY_NAME[p["qos"]])
+        self.on_shutdown(self.write_summary)
 
     def on_message(self, msg: Any) -> None:
         seq = sequence_number(self.kind, msg)
@@ -140,18 +150,18 @@ class Listener:
         self.received += 1
         now = time.monotonic_ns()
         if self.first_ns is None:
-            self.node.logger.info("receiving: first message %d", seq)
+            self.get_logger().info(f"receiving: first message {seq}")
         self.first_ns = self.first_ns or now
         self.last_ns = now
-        if self.node.params["count"] and self.received >= self.node.params["count"]:
-            self.node.request_shutdown()
+        if self.p["count"] and self.received >= self.p["count"]:
+            self.request_shutdown()
 
-    def close(self) -> None:
-        if self.node.params["result_file"]:
+    def write_summary(self) -> None:
+        if self.p["result_file"]:
             summary = {
                 "received": self.received,
                 "out_of_order": self.out_of_order,
                 "last": self.last,
                 "span_s": (self.last_ns - (self.first_ns or self.last_ns)) / 1e9,
             }
-            Path(self.node.params["result_file"]).write_text(json.dumps(summary))
+            Path(self.p["result_file"]).write_text(json.dumps(summary))

@@ -8,11 +8,12 @@ and is reported on ``/experiment/anomaly`` (``no_pitch``).
 """
 
 import sys
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from pressure_scanner.tap_cloud import fill_cloud, point_fields
 from pressure_scanner.taps import load_taps
-from rig_runtime import Node, Parameter, run_node, stamp_to_ns
+from rig_runtime import Node, Parameter, new_message, run_node, stamp_to_ns
 from rig_runtime.interface import (
     ALPHA_TRUE_JOINT,
     PITCH_JOINT,
@@ -20,6 +21,7 @@ from rig_runtime.interface import (
     PRESSURE_TAPS,
     joint_position,
 )
+from rig_runtime.qos_profiles import QOS_BY_NAME, topic_qos
 
 from .plant import WingPlant
 from .wing_params import PRESETS, WingParams, wing_params_preset
@@ -42,7 +44,7 @@ PARAMETERS = [
 ]
 
 
-def wing_params(p: Any) -> WingParams:
+def wing_params(p: Mapping[str, Any]) -> WingParams:
     """The WingParams of the node's parameters: the preset, then the set overrides."""
     overrides: dict[str, float] = {}
     if p["light_stall_fraction"] >= 0:
@@ -52,24 +54,28 @@ def wing_params(p: Any) -> WingParams:
     return wing_params_preset(p["preset"], **overrides)
 
 
-class SimWing:
-    def __init__(self, node: Node) -> None:
-        p = node.params
-        self.node = node
+class SimWingNode(Node):
+    NODE_NAME = "sim_wing"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
         taps = load_taps(p["taps_file"] or None)
         self.plant = WingPlant(wing_params(p), taps, seed=p["seed"])
-        self.fields = point_fields(node.new_message)
-        self.pub = node.create_publisher(PRESSURE_TAPS.type, PRESSURE_TAPS.name, p["taps_qos"])
-        node.create_subscription(
-            PITCH_STATE.type, PITCH_STATE.name, self.on_state, PITCH_STATE.qos, required=True
+        self.fields = point_fields(new_message)
+        # The state and taps streams on the serialized path (node.py).
+        self.taps_pub = self.create_publisher(
+            PRESSURE_TAPS.type, PRESSURE_TAPS.name, QOS_BY_NAME[p["taps_qos"]]
+        )
+        self.create_subscription(
+            PITCH_STATE.type, PITCH_STATE.name, self.on_state, topic_qos(PITCH_STATE), required=True
         )
         self.refused = 0
-        node.logger.info(
-            "simulated wing (%s): %d taps, q = %.1f Pa, light-stall fraction %.2f",
-            p["preset"],
-            taps.n_taps,
-            self.plant.dynamic_pressure_pa,
-            self.plant.params.light_stall_fraction,
+        self.get_logger().info(
+            f"simulated wing ({p['preset']}): {taps.n_taps} taps, "
+            f"q = {self.plant.dynamic_pressure_pa:.1f} Pa, "
+            f"light-stall fraction {self.plant.params.light_stall_fraction:.2f}"
         )
 
     def on_state(self, msg: Any) -> None:
@@ -78,22 +84,22 @@ class SimWing:
         alpha = joint_position(msg, joint)
         if alpha is None:  # joint_position: None for a missing or non-finite joint
             self.refused += 1
-            self.node.anomalies.point(
+            self.anomalies.point(
                 "no_pitch",
                 stamp_to_ns(msg.header.stamp),
                 detail="state without a finite pitch: no taps sample for it",
             )
             return
         pressures = self.plant.step(alpha)
-        cloud = self.node.new_message(PRESSURE_TAPS.type)
+        cloud = new_message(PRESSURE_TAPS.type)
         cloud.header.stamp = msg.header.stamp
         cloud.header.frame_id = "wing"
-        fill_cloud(cloud, self.node.new_message, self.plant.tap_xyz, pressures, self.fields)
-        self.pub.publish(cloud)
+        fill_cloud(cloud, new_message, self.plant.tap_xyz, pressures, self.fields)
+        self.taps_pub.publish(cloud)
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(SimWing, "sim_wing", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(SimWingNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ from rig_runtime.interface import (
     PRESSURE_TAPS,
     WING_COEFFICIENTS,
 )
+from rig_runtime.qos_profiles import QOS_BY_NAME
 
 from .logger import RigViewLogger
 from .recording import MODES, TOPICS, close_recording, open_recording, takes_cdr
@@ -57,12 +58,15 @@ PARAMETERS = [
 ]
 
 
-class View:
+class ViewNode(Node):
     """The view node: subscribes the rig topics and feeds a :class:`RigViewLogger`.
 
-    High-rate streams are read best effort (a slow viewer drops samples, it never holds back
-    the experiment; best effort matches reliable and best-effort publishers); segment events
-    reliable and deep; model and status latched, so a late view still gets the current model.
+    Every reader takes the runtime's messages (the serialized path, node.py), the messages a
+    recorded bag gives ``view_bag``, so that the live and the replayed view are drawn by the
+    same code. High-rate streams are read best effort (a slow viewer drops samples, it never
+    holds back the experiment; best effort matches reliable and best-effort publishers);
+    segment events reliable and deep; model and status latched, so a late view still gets the
+    current model.
     """
 
     # The histories hold several times what the generator may publish at once (its
@@ -78,9 +82,12 @@ class View:
         IDENTIFICATION_STATUS.name: (IDENTIFICATION_STATUS.qos, 100),
     }
 
-    def __init__(self, node: Node) -> None:
-        p = node.params
-        self.node = node
+    NODE_NAME = "view"
+    PARAMETERS = PARAMETERS
+
+    def __init__(self, argv: Sequence[str] | None = None) -> None:
+        super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
+        p = self.parameter_values()
         self.rec, where = open_recording(
             p["application_id"],
             p["mode"],
@@ -89,30 +96,36 @@ class View:
             url=p["url"],
             bind_ip=p["bind_ip"],
         )
-        self.logger = RigViewLogger(
+        self.rerun_log = RigViewLogger(
             self.rec,
             taps_decimation=p["taps_decimation"],
             series_decimation=p["series_decimation"],
             trail_s=p["trail_s"],
         )
         self.errors = 0
-        self.subscriptions: list[Any] = []
+        self.readers: list[Any] = []
         for topic, (type_name, handler) in TOPICS.items():
             qos, depth = self.QOS[topic]
-            call = getattr(self.logger, handler)
+            call = getattr(self.rerun_log, handler)
             raw = takes_cdr(handler)  # a raw subscription: (CDR bytes, receive time)
             if raw:
                 call = self._serialized(call)
-            self.subscriptions.append(
-                node.create_subscription(
-                    type_name, topic, self._guard(topic, call), qos, depth=depth, raw=raw
+            self.readers.append(
+                self.create_subscription(
+                    type_name,
+                    topic,
+                    self._guard(topic, call),
+                    QOS_BY_NAME[qos],
+                    depth=depth,
+                    raw=raw,
                 )
             )
         # The series go to Rerun in batches (RigViewLogger): this bounds how long a sample waits.
-        node.create_timer(p["series_flush_s"], self.logger.send_series)
+        self.create_timer(p["series_flush_s"], self.rerun_log.send_series)
         if p["stats_period_s"] > 0:
-            node.create_timer(p["stats_period_s"], self.log_stats)
-        node.logger.info("view: %s", where)
+            self.create_timer(p["stats_period_s"], self.log_stats)
+        self.on_shutdown(self.close_recording)
+        self.get_logger().info(f"view: {where}")
 
     @staticmethod
     def _serialized(handler: Callable[[Any], None]) -> Callable[[Any], None]:
@@ -127,36 +140,34 @@ class View:
                 handler(msg)
             except (ValueError, KeyError, TypeError) as exc:
                 self.errors += 1
-                self.logger.warn(topic, str(exc).removeprefix(f"{topic}: "))
+                self.rerun_log.warn(topic, str(exc).removeprefix(f"{topic}: "))
                 if self.errors <= 20 or self.errors % 1000 == 0:
-                    self.node.logger.warning("%s: %s (%d bad messages)", topic, exc, self.errors)
+                    self.get_logger().warning(f"{topic}: {exc} ({self.errors} bad messages)")
 
         return call
 
     def log_stats(self) -> None:
         """Counts of what arrived, and how many of the view's readers have matched a writer (a
         best-effort reader drops what a writer sends before the reader has matched it)."""
-        counts = " ".join(f"{k}={v}" for k, v in self.logger.counts.items())
-        matched = sum(s.publisher_count() > 0 for s in self.subscriptions)
-        self.node.logger.info(
-            "received %s errors=%d matched=%d/%d",
-            counts,
-            self.errors,
-            matched,
-            len(self.subscriptions),
+        counts = " ".join(f"{k}={v}" for k, v in self.rerun_log.counts.items())
+        matched = sum(s.publisher_count() > 0 for s in self.readers)
+        self.get_logger().info(
+            f"received {counts} errors={self.errors} matched={matched}/{len(self.readers)}"
         )
 
-    def close(self) -> None:
+    def close_recording(self) -> None:
+        """At shutdown: the counts and the report logged, the buffered series sent, the
+        recording closed."""
         try:
             self.log_stats()
-            self.node.logger.info("%s", self.logger.report())
+            self.get_logger().info(self.rerun_log.report())
         finally:
-            self.logger.send_series()
+            self.rerun_log.send_series()
             close_recording(self.rec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    return run_node(View, "view", PARAMETERS, argv, description=__doc__ or "")
+    return run_node(ViewNode, argv, description=__doc__ or "")
 
 
 if __name__ == "__main__":
