@@ -306,13 +306,13 @@ class Node(rclpy.node.Node):
     def anomalies(self) -> AnomalyLog:
         """This node's anomaly log: records go to /experiment/anomaly and to the log."""
         if self._anomalies is None:
-            pub = self.create_publisher(
-                EXPERIMENT_ANOMALY.type, EXPERIMENT_ANOMALY.name, EXPERIMENT_ANOMALY.qos
-            )
+            from std_msgs.msg import String
+
+            pub = self.create_publisher(String, EXPERIMENT_ANOMALY.name, EXPERIMENT_ANOMALY.qos)
 
             def send(anomaly: Anomaly) -> None:
                 self.logger.warning("anomaly: %s", anomaly.describe())
-                pub.publish(self.new_message(EXPERIMENT_ANOMALY.type, data=anomaly.to_json()))
+                pub.publish(String(data=anomaly.to_json()))
 
             self._anomalies = AnomalyLog(self.fq_name, send)
         return self._anomalies

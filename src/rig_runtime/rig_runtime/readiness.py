@@ -70,7 +70,9 @@ class Readiness:
         # The anomaly writer exists before the node reports ready, so the barrier sees it matched
         # to the identifier and the recorder: a first anomaly record is never sent into the void.
         _ = node.anomalies
-        self._pub = node.create_publisher(GRAPH_READY.type, GRAPH_READY.name, GRAPH_READY.qos)
+        from std_msgs.msg import String
+
+        self._pub = node.create_publisher(String, GRAPH_READY.name, GRAPH_READY.qos)
         self.announce()
         node.create_timer(period_s, self.announce)
 
@@ -84,4 +86,4 @@ class Readiness:
         text = self.report().to_json()
         if text != self._last_report:
             self._last_report = text
-            self._pub.publish(self.node.new_message(GRAPH_READY.type, data=text))
+            self._pub.publish(self._pub.handle.msg_type(data=text))
