@@ -131,7 +131,7 @@ def throughput(plan: str, run_dir: Path, view: bool = False) -> dict[str, Any]:
                 refit_memory.append([int(memory[3]), int(memory[1]), int(memory[2])])
     experiment_s = monitor.total / monitor.fs
     extra: dict[str, Any] = {}
-    if view:  # the view's last count of what it received (View.log_stats, on its shutdown)
+    if view:  # the view's last count of what it received (ViewNode.log_stats, on its shutdown)
         counts = re.findall(r"received (.*) errors=", (run_dir / "logs" / "view.log").read_text())
         extra["view_received"] = {
             k: int(v) for k, v in (item.split("=") for item in counts[-1].split())

@@ -21,7 +21,18 @@ import pytest
 SRC = Path(__file__).resolve().parents[2]
 PACKAGES = sorted(p.parent.name for p in SRC.glob("*/package.xml"))
 # Modules that bring up a middleware when imported (directly or through what they import).
-MIDDLEWARE = ("rclpy", "rig_runtime.node", "rig_runtime.node_main")
+MIDDLEWARE = (
+    "rclpy",
+    "rig_runtime.node",
+    "rig_runtime.node_main",
+    "rig_runtime.qos_profiles",
+    "std_msgs",
+    "diagnostic_msgs",
+    "sensor_msgs",
+    "geometry_msgs",
+)
+# ROS packages a module may import only if its package.xml declares them.
+ROS_PACKAGES = ("rclpy", "std_msgs", "diagnostic_msgs", "sensor_msgs", "geometry_msgs")
 ALGORITHM_PACKAGES = ("multisine_gen", "wing_sim", "aero_identification")
 
 
@@ -71,6 +82,18 @@ def test_a_package_imports_only_what_its_package_xml_declares(package: str) -> N
         if name.split(".")[0] in PACKAGES and name.split(".")[0] not in allowed
     }
     assert not wrong, f"undeclared (or upward) imports: {sorted(wrong)}"
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_a_package_declares_the_ros_packages_it_imports(package: str) -> None:
+    declared = _declared(package)
+    wrong = {
+        f"{path.relative_to(SRC)}: {name}"
+        for path in _modules(package)
+        for name in _imports(path)
+        if name.split(".")[0] in ROS_PACKAGES and name.split(".")[0] not in declared
+    }
+    assert not wrong, f"ROS packages imported but not declared in package.xml: {sorted(wrong)}"
 
 
 @pytest.mark.parametrize("package", ALGORITHM_PACKAGES)

@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from std_msgs.msg import String
+from std_msgs.msg import Header, String
 
 from rig_runtime import Node, Parameter, new_message, run_node, set_stamp, stamp_to_ns
 from rig_runtime.barrier import ReadinessReport, StartBarrier
@@ -206,9 +206,9 @@ class GeneratorNode(Node):
         self.barrier = StartBarrier(p["barrier_nodes"])
         self.barrier_checked = 0.0
         self.barrier_logged = time.monotonic()
-        if p["flow_control"]:  # the credit, on the serialized path as the stream it paces
+        if p["flow_control"]:
             self.create_subscription(
-                WING_PROGRESS.type,
+                Header,
                 WING_PROGRESS.name,
                 self.on_progress,
                 topic_qos(WING_PROGRESS),
@@ -323,7 +323,7 @@ class GeneratorNode(Node):
             return False
         return True
 
-    def on_progress(self, msg: Any) -> None:
+    def on_progress(self, msg: Header) -> None:
         """The lift's latest coefficients stamp (std_msgs/Header): the credit."""
         if self.t0_ns is None:
             return

@@ -10,12 +10,13 @@ from types import SimpleNamespace
 from typing import Any
 
 import pytest
+from std_msgs.msg import Header
 
 from multisine_gen.generator_node import GeneratorNode
 from multisine_gen.plan_format import read_plan_message
 from multisine_gen.revision import PlanRequest
 from rig_runtime.interface import WING_COEFFICIENTS, WING_PROGRESS
-from rig_runtime.messages import new_message, set_stamp
+from rig_runtime.messages import set_stamp
 from rig_testing.processes import graph_env, join_graph
 
 
@@ -187,7 +188,7 @@ def test_the_credit_comes_from_the_lifts_progress_stamps() -> None:
     commands = node.endpoints["/pitch/command"].sent
     gen.tick()
     assert len(commands) == 50  # nothing came back yet: the lead alone
-    progress = new_message(WING_PROGRESS.type, frame_id="wing")
+    progress = Header(frame_id="wing")
     set_stamp(progress.stamp, gen.stamp_ns(29))
     gen.on_progress(progress)
     gen.tick()

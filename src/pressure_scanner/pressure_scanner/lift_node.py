@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import Header
 
 from rig_runtime import Node, Parameter, new_message, run_node, stamp_to_ns
 from rig_runtime.diagnostics import diagnostic_array
@@ -96,9 +97,8 @@ class LiftNode(Node):
         self.coefficients_pub = self.create_publisher(
             WING_COEFFICIENTS.type, WING_COEFFICIENTS.name, qos
         )
-        # The generator's credit (multisine_gen.pacing), on the serialized path as the stream.
         self.progress_pub = self.create_publisher(
-            WING_PROGRESS.type, WING_PROGRESS.name, topic_qos(WING_PROGRESS)
+            Header, WING_PROGRESS.name, topic_qos(WING_PROGRESS)
         )
         self.latest_stamp: Any = None  # of the last coefficients sample published
         self.progress_stamp: Any = None  # the last one /wing/coefficients/progress carried
@@ -158,10 +158,10 @@ class LiftNode(Node):
     def publish_progress(self) -> None:
         if self.latest_stamp is None or self.latest_stamp is self.progress_stamp:
             return
-        self.progress_stamp = self.latest_stamp
-        self.progress_pub.publish(
-            new_message(WING_PROGRESS.type, stamp=self.latest_stamp, frame_id="wing")
-        )
+        self.progress_stamp = stamp = self.latest_stamp
+        progress = Header(frame_id="wing")
+        progress.stamp.sec, progress.stamp.nanosec = int(stamp.sec), int(stamp.nanosec)
+        self.progress_pub.publish(progress)
 
     def publish_diagnostics(self) -> None:
         excluded = {

@@ -31,7 +31,11 @@ class FlowReport:
         node = self.node
         from diagnostic_msgs.msg import DiagnosticArray
 
-        self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS.name, DIAGNOSTICS.qos)
+        from .qos_profiles import topic_qos
+
+        self.publisher = node.create_publisher(
+            DiagnosticArray, DIAGNOSTICS.name, topic_qos(DIAGNOSTICS)
+        )
         self.period_s = period_s
         node.create_timer(period_s, self.report)
 

@@ -337,7 +337,7 @@ def check_node(spec: NodeSpec, extra_overrides: Mapping[str, Any] | None = None)
     try:
         if check is not None:
             check(params)
-    except ValueError as exc:  # as run_node prints what the node's factory raises
+    except ValueError as exc:  # as run_node prints what the node class's __init__ raises
         raise GraphError(f"[FATAL] [{spec.fq_name}]: {exc}") from None
 
 

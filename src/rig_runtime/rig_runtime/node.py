@@ -26,9 +26,6 @@ interface contract's ``Topic.type``) instead of a message class, they send and t
 serialized CDR of the runtime's messages (rosbags dataclasses with numpy sequences,
 messages.py) through rclpy's serialized publish and ``raw=True`` subscriptions: the sample
 streams, where rclpy's message conversion costs the most (bench/transport.py measures it).
-
-rclpy comes from the PyPI wheels (``pip install "ros-jazzy-rclpy[fastrtps]"
-ros-jazzy-common-interfaces``, CPython 3.10-3.13 on x86_64 Linux) or a sourced ROS 2 Jazzy.
 """
 
 import logging
@@ -126,6 +123,8 @@ class Node(rclpy.node.Node):
             self.name = str(self.get_name())
             self.namespace = str(self.get_namespace())
             self.fq_name = str(self.get_fully_qualified_name())
+            # rcl's parsed overrides: rclpy keeps them in _parameter_overrides and has no
+            # public getter for them (node_parameters.py).
             self.params = declare_parameters(self, parameters, self._parameter_overrides)
         except Exception:
             self.destroy_node()
@@ -184,14 +183,11 @@ class Node(rclpy.node.Node):
         depth: int | None = None,
         **kwargs: Any,
     ) -> Any:
-        """rclpy's ``create_publisher``, counted for the flow report and reported to the start
-        barrier, and lingering at ``close`` until its samples are acknowledged.
-
-        ``msg_type`` is an rclpy message class (``publish`` takes its messages), or a ROS type
-        name (``"sensor_msgs/msg/JointState"``) for the serialized path: ``publish`` takes the
-        runtime's messages (messages.py) and sends their CDR bytes, which skips rclpy's
-        conversion on the sample streams (bench/transport.py). ``qos_profile``: an rclpy
-        ``QoSProfile`` (qos_profiles.py), a profile name of qos.py or a depth."""
+        """rclpy's ``create_publisher``, counted for the flow report and the start barrier, and
+        lingering at ``close`` until its samples are acknowledged. ``msg_type``: an rclpy
+        message class, or a ROS type name for the serialized path (``publish`` takes the
+        runtime's messages, messages.py, and sends their CDR: the sample streams,
+        bench/transport.py). ``qos_profile``: an rclpy ``QoSProfile``, a name (qos.py), a depth."""
         if not self._counting:
             return super().create_publisher(msg_type, topic, qos_profile, **kwargs)
         profile = resolve_qos(qos_profile, depth)
@@ -281,6 +277,19 @@ class Node(rclpy.node.Node):
         self.rig_subscriptions.append(subscription)
         return subscription
 
+    # rclpy's destroy_*, for a counted endpoint too (then no longer counted or reported).
+    def destroy_publisher(self, publisher: Any) -> bool:
+        if isinstance(publisher, CdrPublisher):
+            self.rig_publishers.remove(publisher)
+            publisher = publisher.handle
+        return bool(super().destroy_publisher(publisher))
+
+    def destroy_subscription(self, subscription: Any) -> bool:
+        if isinstance(subscription, CdrSubscription):
+            self.rig_subscriptions.remove(subscription)
+            subscription = subscription.handle
+        return bool(super().destroy_subscription(subscription))
+
     def create_timer(self, timer_period_sec: float, callback: Any, *args: Any, **kw: Any) -> Any:
         if not timer_period_sec > 0:
             raise ValueError(f"timer period must be > 0 s, got {timer_period_sec}")
@@ -294,9 +303,6 @@ class Node(rclpy.node.Node):
         """A runtime message by ROS type name (messages.py)."""
         return new_message(type_name, **fields)
 
-    def now_ns(self) -> int:
-        return time.time_ns()
-
     def topic_types(self) -> dict[str, tuple[str, QosProfile | None]]:
         """endpoints.offered_topics of this node's graph."""
         return offered_topics(self)
@@ -308,7 +314,11 @@ class Node(rclpy.node.Node):
         if self._anomalies is None:
             from std_msgs.msg import String
 
-            pub = self.create_publisher(String, EXPERIMENT_ANOMALY.name, EXPERIMENT_ANOMALY.qos)
+            from .qos_profiles import topic_qos
+
+            pub = self.create_publisher(
+                String, EXPERIMENT_ANOMALY.name, topic_qos(EXPERIMENT_ANOMALY)
+            )
 
             def send(anomaly: Anomaly) -> None:
                 self.logger.warning("anomaly: %s", anomaly.describe())

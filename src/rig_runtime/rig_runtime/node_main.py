@@ -73,9 +73,9 @@ def run_node(
 
     # Stopped by a signal, the process is on its way out: a second SIGINT (Ctrl-C in the
     # terminal's process group, then ros2 launch's own) must not kill it after the stop.
+    built = False
     signalled = StopSignals(signal.SIGINT, signal.SIGTERM, on_signal=_stop, ignore_after=True)
     signalled.install()
-    built = False
     # Allocated first and initialised after, so that a subclass whose own __init__ refuses its
     # settings once the rclpy node exists can still be named by it and closed.
     node = node_class.__new__(node_class)

@@ -31,7 +31,7 @@ class Parameter:
     ``min``/``max`` bound numbers (and every element of numeric lists); ``choices`` restricts
     strings. ``read_only`` parameters cannot change after start; a live one
     (``read_only=False``) can be set while the node runs (``ros2 param set``) and is
-    read by the node at each use (``node.params[name]``).
+    read by the node at each use (``node.get_parameter(name).value``).
     """
 
     name: str

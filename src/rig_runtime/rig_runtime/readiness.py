@@ -72,7 +72,9 @@ class Readiness:
         _ = node.anomalies
         from std_msgs.msg import String
 
-        self._pub = node.create_publisher(String, GRAPH_READY.name, GRAPH_READY.qos)
+        from .qos_profiles import topic_qos
+
+        self._pub = node.create_publisher(String, GRAPH_READY.name, topic_qos(GRAPH_READY))
         self.announce()
         node.create_timer(period_s, self.announce)
 

@@ -74,7 +74,7 @@ def close_recording(rec: rr.RecordingStream, timeout_s: float = 10.0) -> None:
 # -- offline ---------------------------------------------------------------------------------
 
 TOPICS: dict[str, tuple[str, str]] = {
-    # topic: (type, handler), from the interface contract. QoS for the live node in View.QOS.
+    # topic: (type, handler), from the interface contract. QoS for the live node in ViewNode.QOS.
     # A handler named *_cdr (takes_cdr) takes the serialized message: the view draws only
     # every taps_decimation-th Cp distribution, the other tap samples are only counted.
     PITCH_COMMAND.name: (PITCH_COMMAND.type, "on_command"),
