@@ -10,7 +10,13 @@ from typing import Any
 
 from . import ros_environment
 from .barrier import Endpoint
-from .messages import cdr_stamp_ns, normalize_type_name, serialize, starts_with_header
+from .messages import (
+    cdr_stamp_ns,
+    normalize_type_name,
+    serialize,
+    stamp_to_ns,
+    starts_with_header,
+)
 from .qos import QosProfile
 
 __all__ = [
@@ -62,6 +68,7 @@ class CdrEndpoint:
     # when the flow is reported, not per message).
     count: int = 0
     last: bytes | None = None
+    last_message: Any = None  # an endpoint of rclpy messages: the last one
 
     def __post_init__(self) -> None:
         # A reliable keep-all endpoint of stamped messages: its flow is reported.
@@ -79,7 +86,11 @@ class CdrEndpoint:
     @property
     def stamp_ns(self) -> int:
         """The header stamp of the last stream message passed (0: none, or not a stream)."""
-        return cdr_stamp_ns(self.last) if self.streams and self.last is not None else 0
+        if not self.streams:
+            return 0
+        if self.last_message is not None:  # an endpoint of rclpy messages
+            return stamp_to_ns(self.last_message.header.stamp)
+        return cdr_stamp_ns(self.last) if self.last is not None else 0
 
 
 class CdrPublisher(CdrEndpoint):
@@ -122,8 +133,6 @@ class MessagePublisher(CdrPublisher):
     """An rclpy publisher of rclpy messages (a node's events, status and diagnostics, where
     rclpy's conversion costs nothing that matters), counted and reported like the CDR ones."""
 
-    last_message: Any = None
-
     def publish(self, msg: Any) -> None:
         try:
             self.handle.publish(msg)
@@ -135,30 +144,14 @@ class MessagePublisher(CdrPublisher):
     def publish_raw(self, data: bytes) -> None:
         raise TypeError(f"{self.topic}: a publisher of rclpy messages takes messages, not CDR")
 
-    @property
-    def stamp_ns(self) -> int:
-        msg = self.last_message
-        if not self.streams or msg is None:
-            return 0
-        return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-
 
 class MessageSubscription(CdrSubscription):
     """An rclpy subscription delivering rclpy messages, counted and reported like the CDR
     ones."""
 
-    last_message: Any = None
-
     def took(self, msg: Any) -> None:
         self.count += 1
         self.last_message = msg
-
-    @property
-    def stamp_ns(self) -> int:
-        msg = self.last_message
-        if not self.streams or msg is None:
-            return 0
-        return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 def endpoint_record(entity: CdrEndpoint, kind: str, gid: str, count: int) -> Endpoint:

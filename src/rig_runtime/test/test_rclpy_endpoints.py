@@ -92,6 +92,40 @@ def test_messages_are_the_runtime_s_own_on_both_ends(rclpy_env: None) -> None:
         listener.close()
 
 
+def test_endpoints_of_rclpy_message_classes_are_counted_and_reported(rclpy_env: None) -> None:
+    """An rclpy message class and QoSProfile: rclpy's messages on both ends, the endpoints in
+    the readiness report with their matched counts and QoS, a required input named, and
+    rclpy's destroy_* taking them back out."""
+    from std_msgs.msg import String
+
+    from rig_runtime.qos_profiles import EVENTS_QOS, LATCHED_QOS
+
+    talker = Node("talker", argv=[])
+    listener = Node("listener", argv=[])
+    got: list[Any] = []
+    try:
+        sub = listener.create_subscription(String, "/events", got.append, EVENTS_QOS, required=True)
+        pub = talker.create_publisher(String, "/events", EVENTS_QOS)
+        latched = talker.create_publisher(String, "/latched", LATCHED_QOS)
+        assert talker.spin_until(lambda: pub.subscription_count() == 1, 10.0)
+        pub.publish(String(data="plan_end"))
+        assert listener.spin_until(lambda: len(got) == 1, 10.0)
+        assert isinstance(got[0], String) and got[0].data == "plan_end"
+        assert (pub.count, sub.count) == (1, 1)
+        writers = {e.topic: e for e in talker.readiness_report().endpoints if e.kind == "writer"}
+        assert writers["/events"].matched_count == 1 and writers["/events"].reliable
+        assert writers["/latched"].transient_local and not writers["/events"].transient_local
+        report = listener.readiness_report()
+        assert report.required_inputs == ("/events",)
+        (reader,) = [e for e in report.endpoints if e.topic == "/events"]
+        assert reader.kind == "reader" and reader.matched_count == 1
+        assert talker.destroy_publisher(latched)
+        assert "/latched" not in {e.topic for e in talker.readiness_report().endpoints}
+    finally:
+        talker.close()
+        listener.close()
+
+
 def test_parameters_come_from_rcl_and_keep_the_runtime_s_checks(rclpy_env: None) -> None:
     node = Node(
         "gen",
