@@ -13,6 +13,7 @@
 import ast
 import subprocess
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -72,27 +73,27 @@ def test_the_workspace_has_its_eight_packages() -> None:
     )
 
 
-@pytest.mark.parametrize("package", PACKAGES)
-def test_a_package_imports_only_what_its_package_xml_declares(package: str) -> None:
+def _undeclared(package: str, among: Sequence[str]) -> set[str]:
+    """The imports by ``package``'s modules of packages in ``among`` that its package.xml does
+    not declare (itself excepted), as ``path: module``."""
     allowed = _declared(package) | {package}
-    wrong = {
+    return {
         f"{path.relative_to(SRC)}: {name}"
         for path in _modules(package)
         for name in _imports(path)
-        if name.split(".")[0] in PACKAGES and name.split(".")[0] not in allowed
+        if name.split(".")[0] in among and name.split(".")[0] not in allowed
     }
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_a_package_imports_only_what_its_package_xml_declares(package: str) -> None:
+    wrong = _undeclared(package, PACKAGES)
     assert not wrong, f"undeclared (or upward) imports: {sorted(wrong)}"
 
 
 @pytest.mark.parametrize("package", PACKAGES)
 def test_a_package_declares_the_ros_packages_it_imports(package: str) -> None:
-    declared = _declared(package)
-    wrong = {
-        f"{path.relative_to(SRC)}: {name}"
-        for path in _modules(package)
-        for name in _imports(path)
-        if name.split(".")[0] in ROS_PACKAGES and name.split(".")[0] not in declared
-    }
+    wrong = _undeclared(package, ROS_PACKAGES)
     assert not wrong, f"ROS packages imported but not declared in package.xml: {sorted(wrong)}"
 
 

@@ -204,6 +204,9 @@ class GeneratorNode(Node):
             max_lead=p["max_lead_samples"],
         )
         self.barrier = StartBarrier(p["barrier_nodes"])
+        self.wait_for_subscribers = p["wait_for_subscribers"]
+        self.start_timeout_s = p["start_timeout_s"]
+        self.exit_at_end = p["exit_at_end"]
         self.barrier_checked = 0.0
         self.barrier_logged = time.monotonic()
         if p["flow_control"]:
@@ -345,7 +348,7 @@ class GeneratorNode(Node):
 
     def pending(self) -> list[str]:
         """What the start still waits for (empty: every member ready and matched)."""
-        wanted = self.get_parameter("wait_for_subscribers").value
+        wanted = self.wait_for_subscribers
         waiting = self.barrier.pending(self.readiness_report())
         subscribers = self.cmd_pub.subscription_count()
         if subscribers < wanted:
@@ -362,7 +365,7 @@ class GeneratorNode(Node):
         self.barrier_checked = now
         waiting = self.pending()
         if waiting:
-            timeout_s = self.get_parameter("start_timeout_s").value
+            timeout_s = self.start_timeout_s
             if now - self.created > timeout_s:
                 self.get_logger().error(
                     f"start barrier: not ready after {timeout_s:.0f} s, nothing was sent: "
@@ -424,7 +427,7 @@ class GeneratorNode(Node):
                 f"plan finished: {self.total} samples published ({self.planned_samples} "
                 f"planned, revision {self.plan.revision})"
             )
-            if self.get_parameter("exit_at_end").value:
+            if self.exit_at_end:
                 self.request_shutdown(0)
 
     def stream_state(self) -> str:

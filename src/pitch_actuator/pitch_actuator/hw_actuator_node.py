@@ -122,6 +122,7 @@ class HwActuatorNode(Node):
         self.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
         self.create_timer(p["diagnostics_period_s"], self.update_link_diagnostics)
         self.published = 0
+        self.controller_stamps = p["stamp_source"] == "controller"
         self.get_logger().info(
             f"controller link {self.link.local_address} -> {self.link.controller_address}"
         )
@@ -182,11 +183,7 @@ class HwActuatorNode(Node):
             position=[feedback.position_rad],
             velocity=[feedback.velocity_rad_s],
         )
-        stamp = (
-            feedback.stamp_ns
-            if self.get_parameter("stamp_source").value == "controller"
-            else time.time_ns()
-        )
+        stamp = feedback.stamp_ns if self.controller_stamps else time.time_ns()
         set_stamp(msg.header.stamp, stamp)
         self.state_pub.publish(msg)
         self.published += 1

@@ -17,7 +17,7 @@ from .messages import (
     stamp_to_ns,
     starts_with_header,
 )
-from .qos import QosProfile
+from .qos import QosProfile, from_rclpy_qos
 
 __all__ = [
     "CdrEndpoint",
@@ -171,19 +171,9 @@ def offered_topics(node: Any) -> dict[str, tuple[str, QosProfile | None]]:
     name, QoS offered by the first). A topic known only from its readers has no offered QoS
     yet, and a recorder that guessed one could ask for reliable from a best-effort writer and
     never be matched."""
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
-
     result: dict[str, tuple[str, QosProfile | None]] = {}
     for name, types in node.get_topic_names_and_types():
         for info in node.get_publishers_info_by_topic(name):
-            q = info.qos_profile
-            profile = QosProfile(
-                "best_effort" if q.reliability == ReliabilityPolicy.BEST_EFFORT else "reliable",
-                "transient_local"
-                if q.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                else "volatile",
-                0 if q.history == HistoryPolicy.KEEP_ALL else int(q.depth),
-            )
-            result[name] = (types[0], profile)
+            result[name] = (types[0], from_rclpy_qos(info.qos_profile))
             break
     return result
