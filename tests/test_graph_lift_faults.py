@@ -240,3 +240,36 @@ def test_the_progress_carries_the_latest_published_stamp(
     published = {s for s, _ in client.out}
     assert set(client.progress) <= published
     assert client.progress == sorted(set(client.progress)), "a stamp again, or out of order"
+
+
+def test_taps_whose_state_is_still_in_the_reader_at_shutdown_get_their_pitch(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The graph stops with a taps sample waiting for its pitch and that state received but
+    not yet delivered: the lift takes it before it releases the taps (one valid sample, none
+    without pitch)."""
+    from pressure_scanner.lift_node import LiftNode
+
+    join_graph(graph_env(), monkeypatch.setenv)
+    lift = LiftNode([])
+    client = LiftClient()
+    try:
+        assert client.node.spin_until(
+            lambda: (
+                client.state_pub.subscription_count() > 0
+                and client.taps_pub.subscription_count() > 0
+            ),
+            30.0,
+        )
+        plant = WingPlant(WingParams(), load_taps(), seed=0)
+        client.publish_taps(0, plant.step(math.radians(ALPHA_DEG)))
+        assert lift.spin_until(lambda: lift.alignment.pending_count == 1, 10.0)
+        client.publish_state(0, math.radians(ALPHA_DEG))
+        # In the lift's reader (acknowledged), not delivered: the lift has not spun since.
+        from rclpy.duration import Duration
+
+        assert client.state_pub.handle.wait_for_all_acked(Duration(seconds=10))
+    finally:
+        lift.close()
+        client.close()
+    assert lift.counts == {"published": 1, "invalid": 0, "alpha_missing": 0}

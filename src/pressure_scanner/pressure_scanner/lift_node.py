@@ -64,6 +64,9 @@ HISTORY = 4000
 # Period of /wing/coefficients/progress [s]: at the simulation's full speed (about 5,000 samples
 # a second) a credit every 25 samples or so, far inside the generator's lead (1,000 samples).
 PROGRESS_PERIOD_S = 0.005
+# At shutdown, how long the readers are drained for the waiting taps' pitch [s]: a stopped
+# graph's last states are in the reader already or arrive within a heartbeat (100 ms).
+DRAIN_TIMEOUT_S = 1.0
 
 
 def gap_ns(seconds: float) -> int:
@@ -178,8 +181,11 @@ class LiftNode(Node):
         self.diagnostics_pub.publish(msg)
 
     def flush(self) -> None:
-        """At shutdown: the taps still waiting for their pitch, then the last progress and
-        diagnostics."""
+        """At shutdown: the pitch states already received for the taps still waiting taken
+        (the readers drained, at most ``DRAIN_TIMEOUT_S``), then the taps released with what is
+        known, then the last progress and diagnostics. Without the drain, taps whose state sat
+        in the reader when the graph stopped would count as having no pitch."""
+        self.drain(lambda: self.alignment.pending_count == 0, DRAIN_TIMEOUT_S)
         for stamp, taps, alpha in self.alignment.flush():
             self._process(stamp, taps, alpha)
         self.publish_progress()
