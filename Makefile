@@ -8,12 +8,15 @@ BIN    := $(VENV)/bin
 export ROS_WHEELS_EXIST := import platform, sys; sys.exit(0 if platform.system() == "Linux" and platform.machine() == "x86_64" and (3, 10) <= sys.version_info[:2] <= (3, 13) else 1)
 export PLATFORM := import platform, sys; print(platform.machine(), "Python", platform.python_version())
 STAMP  := $(VENV)/.installed
+INTERFACES := $(VENV)/.interfaces
+IFACE_FILES := $(wildcard src/aero_rig_interfaces/msg/*.msg src/aero_rig_interfaces/srv/*.srv) \
+  src/aero_rig_interfaces/CMakeLists.txt src/aero_rig_interfaces/package.xml
 PACKAGES := rig_runtime rig_testing multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
 PKG_FILES := $(foreach p,$(PACKAGES),src/$(p)/setup.py src/$(p)/package.xml)
 
 .PHONY: test test-fast campaign lint format typecheck bench venv clean
 
-venv: $(STAMP)
+venv: $(INTERFACES)
 
 $(BIN)/python:
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' || \
@@ -41,11 +44,21 @@ $(STAMP): $(BIN)/python $(PKG_FILES) requirements-dev.txt requirements-ros.txt c
 	fi
 	@touch $(STAMP)
 
+# The rig's messages and control service (src/aero_rig_interfaces, ament_cmake + rosidl), built
+# into the venv with the rosidl generators from PyPI when rclpy is there (a sourced ROS 2 Jazzy's
+# or the wheels). Needs cmake and a C/C++ compiler; without them one line says what is missing.
+# On a ROS machine, colcon builds the package like any interface package.
+$(INTERFACES): $(STAMP) $(IFACE_FILES)
+	@if $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
+	  PIP_CONSTRAINT=$(CURDIR)/constraints.txt src/aero_rig_interfaces/build_in_venv.sh $(VENV) || exit 1; \
+	else echo "aero_rig_interfaces: no rclpy, not built (the offline verbs read the .msg files)"; fi
+	@touch $(INTERFACES)
+
 # The real ros2 tools for the tests (ros2cli, launch_ros, ... from ../shared/ros2-python, with
 # composition_interfaces built for launch_ros). Absent or failing: those tests skip, saying why.
 ROS2_PYTHON ?= ../shared/ros2-python
 ROS2_TOOLS := $(VENV)/.ros2-tools
-$(ROS2_TOOLS): $(STAMP)
+$(ROS2_TOOLS): $(INTERFACES)
 	@if [ -d "$(ROS2_PYTHON)" ] && $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
 	  $(ROS2_PYTHON)/install.sh $(VENV) && \
 	  ($(ROS2_PYTHON)/build_composition_interfaces.sh $(VENV) || \
@@ -73,7 +86,7 @@ test: lint typecheck $(ROS2_TOOLS)
 test-fast: $(STAMP)
 	$(BIN)/pytest -m "not slow"
 
-campaign: $(STAMP)
+campaign: $(INTERFACES)
 	$(BIN)/aero-rig campaign --plan default $(CAMPAIGN_ARGS)
 
 bench: $(STAMP)
