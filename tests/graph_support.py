@@ -111,7 +111,7 @@ class PeerReaders:
         node.create_subscription(GRAPH_READY.type, GRAPH_READY.name, self._on_report, "latched")
 
     def _on_report(self, msg: Any) -> None:
-        report = ReadinessReport.from_json(msg.data)
+        report = ReadinessReport.from_message(msg)
         self.reports[report.node] = report
 
     def matched(self, topics: list[str]) -> bool:

@@ -334,7 +334,7 @@ class GeneratorNode(Node):
 
     def on_ready(self, msg: String) -> None:
         try:
-            self.barrier.update(ReadinessReport.from_json(msg.data))
+            self.barrier.update(ReadinessReport.from_message(msg))
         except (ValueError, KeyError) as exc:
             self.get_logger().warning(f"ignored a malformed readiness report: {exc}")
         self.barrier_checked = 0.0  # look again at the next tick

@@ -1,14 +1,17 @@
-"""The JSON wire format of an ExperimentPlan: `/experiment/plan` and `/experiment/segment`.
+"""The wire format of an ExperimentPlan: `/experiment/plan` and `/experiment/segment`.
 
 The only place a plan is written or read as JSON. It imports the model (plan.py), never the
-other way round.
+other way round. The messages are aero_rig_interfaces' ExperimentPlan (the plan's JSON in
+`plan_json`, with the fields a user filters on beside it) and SegmentEvent; bags recorded
+before those carried the same JSON in std_msgs/String and are still read.
 
 `plan_to_dict` / `plan_to_json` write a plan with every excitation parameter (phases, lines,
 amplitudes, seeds), its limits and its segment records; `plan_from_dict` / `plan_from_json`
 rebuild it, so every sample comes out identical, and refuse a payload whose segments disagree
 with the ones its excitations produce. `segment_event` is the `/experiment/segment` payload of a
 segment's start or end: its record (`segment_to_dict`) and the stamps of its first and last
-samples.
+samples; `segment_event_fields` / `segment_event_from_message` carry any event payload through
+a SegmentEvent message and back unchanged.
 """
 
 import json
@@ -40,6 +43,8 @@ __all__ = [
     "plan_to_json",
     "read_plan_message",
     "segment_event",
+    "segment_event_fields",
+    "segment_event_from_message",
     "segment_from_dict",
     "segment_to_dict",
 ]
@@ -178,19 +183,41 @@ def plan_from_json(text: str) -> ExperimentPlan:
     return plan_from_dict(data)
 
 
-def plan_message(plan: ExperimentPlan, t0_ns: int, adaptation: dict[str, int] | None = None) -> str:
-    """The `/experiment/plan` message: the plan's JSON and ``t0_ns``, the stamp of sample 0
-    (docs/design.md §5), and the generator's bounds on an adaptive run's requests
-    (multisine_gen.revision.Adaptation) when given."""
+def plan_message(
+    plan: ExperimentPlan,
+    t0_ns: int,
+    adaptation: dict[str, int] | None = None,
+    plan_id: str = "",
+) -> dict[str, Any]:
+    """The fields of the `/experiment/plan` message (aero_rig_interfaces/ExperimentPlan, but its
+    header): the plan's JSON with ``t0_ns``, the stamp of sample 0 (docs/design.md §5), and the
+    generator's bounds on an adaptive run's requests (multisine_gen.revision.Adaptation) when
+    given; beside it the plan's id, revision, rate, size and levels."""
     payload = plan_to_dict(plan)
     payload["t0_ns"] = int(t0_ns)
     if adaptation is not None:
         payload["adaptation"] = dict(adaptation)
-    return json.dumps(payload, allow_nan=False)
+    offsets = {s.level: s.offset_deg for s in plan.segments if s.kind == "multisine"}
+    return {
+        "plan_id": plan_id,
+        "revision": int(plan.revision),
+        "t0_ns": int(t0_ns),
+        "fs": float(plan.fs),
+        "samples": int(plan.segments[-1].stop_k) if plan.segments else 0,
+        "levels": len(plan.levels),
+        "realizations": [len(lv.realizations) for lv in plan.levels],
+        "offsets_deg": [float(offsets.get(lv.level, math.nan)) for lv in plan.levels],
+        "adaptive": adaptation is not None,
+        "plan_json": json.dumps(payload, allow_nan=False),
+    }
 
 
-def read_plan_message(text: str) -> tuple[ExperimentPlan, int]:
-    """The plan and t0_ns of an `/experiment/plan` message; PlanError when it is not one."""
+def read_plan_message(msg: Any) -> tuple[ExperimentPlan, int]:
+    """The plan and t0_ns of an `/experiment/plan` message (an ExperimentPlan; the std_msgs/String
+    of a bag recorded before it; or its JSON text); PlanError when it is not one."""
+    text = msg if isinstance(msg, str) else getattr(msg, "plan_json", getattr(msg, "data", None))
+    if not isinstance(text, str):
+        raise PlanError(f"/experiment/plan: not a plan message ({type(msg).__name__})")
     try:
         data = json.loads(text)
     except json.JSONDecodeError as error:
@@ -223,6 +250,94 @@ def segment_event(
     payload.update(segment_to_dict(segment))
     payload["start_stamp_s"] = t0_s + segment.start_k / fs
     payload["end_stamp_s"] = t0_s + (segment.stop_k - 1) / fs
+    return payload
+
+
+# SegmentEvent fields that an event payload may leave out, with the value that stands for
+# "absent" on the wire (ROS messages have no optional fields): -1, NaN or "".
+_ABSENT_INT = -1
+_EVENT_INTS = (
+    "index", "start_k", "length", "level", "realization", "period", "periods",
+    "samples_per_period", "sine_test", "t0_ns", "samples", "planned_samples", "revision",
+    "at_k", "after_k", "from_k",
+)  # fmt: skip
+_EVENT_FLOATS = (
+    "offset_deg", "std_deg", "frequency_hz", "amplitude_deg", "start_deg", "end_deg",
+    "rate_deg_s", "start_stamp_s", "end_stamp_s", "fs",
+)  # fmt: skip
+_EVENT_STRINGS = ("kind", "excitation", "direction", "request", "reason", "change", "why")
+# The keys of each event's payload, in the order the generator writes them.
+_SEGMENT_KEYS = ("event", *(f.name for f in fields(Segment)), "start_stamp_s", "end_stamp_s")
+_EVENT_KEYS: dict[str, tuple[str, ...]] = {
+    "start": (*_SEGMENT_KEYS, "t0_ns"),
+    "end": (*_SEGMENT_KEYS, "t0_ns"),
+    "plan_end": ("event", "samples", "fs", "planned_samples", "revision", "t0_ns"),
+    "plan_aborted": ("event", "samples", "t0_ns"),
+    "decision": (
+        "t0_ns", "at_k", "request", "level", "after_k", "reason", "event", "change",
+        "revision", "from_k", "samples",
+    ),
+    "refused": ("t0_ns", "at_k", "request", "level", "after_k", "reason", "event", "why"),
+}  # fmt: skip
+# Keys a payload of that event may lack (the rest it always has): Segment's optional fields
+# (None), a decision's revision (a go_on changes nothing), a refusal's unparsed request.
+_OPTIONAL = {f.name for f in fields(Segment) if f.default is None} | {
+    "revision", "from_k", "samples", "level", "after_k", "reason", "change",
+}  # fmt: skip
+
+
+def segment_event_fields(payload: dict[str, Any]) -> dict[str, Any]:
+    """The SegmentEvent fields (but its header) of an `/experiment/segment` payload: absent
+    and None values as -1, NaN or "" (:func:`segment_event_from_message` reverses it)."""
+    event = payload.get("event")
+    if event not in _EVENT_KEYS:
+        raise PlanError(f"/experiment/segment: unknown event {event!r}")
+    unknown = sorted(set(payload) - set(_EVENT_KEYS[event]))
+    if unknown:
+        raise PlanError(f"/experiment/segment {event} event: unknown field(s) {unknown}")
+    out: dict[str, Any] = {"event": event}
+    for name in _EVENT_INTS:
+        value = payload.get(name)
+        out[name] = _ABSENT_INT if value is None else int(value)
+    for name in _EVENT_FLOATS:
+        value = payload.get(name)
+        out[name] = math.nan if value is None else float(value)
+    for name in _EVENT_STRINGS:
+        value = payload.get(name)
+        out[name] = "" if value is None else str(value)
+    return out
+
+
+def segment_event_from_message(msg: Any) -> dict[str, Any]:
+    """The payload of an `/experiment/segment` message: a SegmentEvent's fields back as the
+    generator's dict (the keys its event has, -1/NaN/"" as None), or the JSON of a
+    std_msgs/String recorded before SegmentEvent existed. PlanError when it is neither."""
+    if hasattr(msg, "data"):
+        try:
+            payload = json.loads(msg.data)
+        except json.JSONDecodeError as error:
+            raise PlanError(f"/experiment/segment is not valid JSON: {error}") from error
+        if not isinstance(payload, dict):
+            raise PlanError("/experiment/segment: not a JSON object")
+        return payload
+    event = str(msg.event)
+    keys = _EVENT_KEYS.get(event)
+    if keys is None:
+        raise PlanError(f"/experiment/segment: unknown event {event!r}")
+    payload = {}
+    for name in keys:
+        value = getattr(msg, name)
+        if name in _EVENT_INTS:
+            value = None if value == _ABSENT_INT else int(value)
+        elif name in _EVENT_FLOATS:
+            value = None if math.isnan(value) else float(value)
+        else:
+            value = str(value)
+            if name not in ("event", "request", "reason", "change", "why") and value == "":
+                value = None
+        if value is None and name in _OPTIONAL and event in ("decision", "refused", "plan_end"):
+            continue  # a key that payload did not have
+        payload[name] = value
     return payload
 
 

@@ -3,8 +3,8 @@
 Any node that knows that a stretch of the stream is not what the plan asked for (the actuator
 ran on without commands, its watchdog tripped, a command was clamped or refused, a scanner frame
 was lost, a state had no finite pitch, the lift had no pitch for a taps sample, ...) publishes
-an :class:`Anomaly` on ``/experiment/anomaly`` (std_msgs/String, JSON, "events" QoS: reliable,
-keep-last 1000). The identifier and the offline fit exclude every period and sine record whose
+an :class:`Anomaly` on ``/experiment/anomaly`` (aero_rig_interfaces/Anomaly, "events" QoS:
+reliable, keep-last 1000). The identifier and the offline fit exclude every period and sine record whose
 stamps the range touches and name the anomaly in their reports; the recorder keeps them in the
 bag. An episode whose end is not known yet (a free-run in progress) is published open
 (``last_ns`` null) and published again, under the same ``id``, when it ends.
@@ -15,6 +15,7 @@ This module is plain data (no middleware): the identification reads it as well.
 import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,33 @@ class Anomaly:
             )
         except (ValueError, KeyError, TypeError) as exc:
             raise ValueError(f"not an anomaly record: {text[:120]!r} ({exc})") from None
+
+    def to_fields(self) -> dict[str, Any]:
+        """The fields of its aero_rig_interfaces/Anomaly message (open: last_ns not known)."""
+        return {
+            "id": self.id,
+            "node": self.node,
+            "kind": self.kind,
+            "first_ns": self.first_ns,
+            "open": self.last_ns is None,
+            "last_ns": 0 if self.last_ns is None else self.last_ns,
+            "detail": self.detail,
+        }
+
+    @classmethod
+    def from_message(cls, msg: Any) -> "Anomaly":
+        """The record of an /experiment/anomaly message: an aero_rig_interfaces/Anomaly, or the
+        std_msgs/String JSON of a bag recorded before the rig had its own messages."""
+        if hasattr(msg, "data"):
+            return cls.from_json(str(msg.data))
+        return cls(
+            id=str(msg.id),
+            node=str(msg.node),
+            kind=str(msg.kind),
+            first_ns=int(msg.first_ns),
+            last_ns=None if msg.open else int(msg.last_ns),
+            detail=str(msg.detail),
+        )
 
     def label(self) -> str:
         """``node kind: detail``: how reports name the anomaly."""

@@ -6,8 +6,8 @@ other on its own. So a stream that starts as soon as the first subscriber appear
 first samples at every reader that is still being discovered (the first wave's 1,000 lost
 samples under load). Instead:
 
-- Every node publishes a :class:`ReadinessReport` on ``/graph/ready`` (std_msgs/String, JSON,
-  reliable + transient-local, as a latched topic in ROS 2): whether the node itself is ready
+- Every node publishes a :class:`ReadinessReport` on ``/graph/ready``
+  (aero_rig_interfaces/ReadinessReport, reliable + transient-local, as a latched topic in ROS 2): whether the node itself is ready
   (its application's own condition, e.g. a driver's link), and for each of its readers and
   writers the topic, the QoS, its GID and the GIDs of the endpoints it has matched (with
   rclpy, which does not expose matched GIDs, only the matched counts). It publishes again
@@ -22,9 +22,9 @@ samples under load). Instead:
 This module is plain data and logic (no middleware), so it is tested in-process.
 """
 
-import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from .interface import GRAPH_READY
 
@@ -62,6 +62,9 @@ class Endpoint:
         )
 
 
+ENDPOINT_FIELDS = ("topic", "kind", "gid", "reliable", "transient_local", "matched_count")
+
+
 def compatible(writer: Endpoint, reader: Endpoint) -> bool:
     """Whether DDS matches this writer with this reader (the QoS that the profiles vary).
 
@@ -77,7 +80,7 @@ def compatible(writer: Endpoint, reader: Endpoint) -> bool:
 
 @dataclass(frozen=True)
 class ReadinessReport:
-    """What one node tells the barrier (the JSON payload of ``/graph/ready``)."""
+    """What one node tells the barrier (aero_rig_interfaces/ReadinessReport, /graph/ready)."""
 
     node: str  # fully qualified node name, e.g. "/lift"
     ready: bool
@@ -87,33 +90,32 @@ class ReadinessReport:
     records: tuple[str, ...] = ()  # a recorder: the topics it records ("*": all but excluded)
     excluded: tuple[str, ...] = ()
 
-    def to_json(self) -> str:
-        return json.dumps(
-            {
-                "node": self.node,
-                "ready": self.ready,
-                "reason": self.reason,
-                "endpoints": [e.to_dict() for e in self.endpoints],
-                "required_inputs": list(self.required_inputs),
-                "records": list(self.records),
-                "excluded": list(self.excluded),
-            },
-            sort_keys=True,
+    def to_message(self, report_cls: Any, endpoint_cls: Any) -> Any:
+        """Its aero_rig_interfaces/ReadinessReport message, of the given message classes."""
+        return report_cls(
+            node=self.node,
+            ready=self.ready,
+            reason=self.reason,
+            endpoints=[endpoint_cls(**e.to_dict()) for e in self.endpoints],
+            required_inputs=list(self.required_inputs),
+            records=list(self.records),
+            excluded=list(self.excluded),
         )
 
     @classmethod
-    def from_json(cls, text: str) -> "ReadinessReport":
-        d = json.loads(text)
-        if not isinstance(d, dict) or "node" not in d:
-            raise ValueError(f"not a readiness report: {text[:80]!r}")
+    def from_message(cls, msg: Any) -> "ReadinessReport":
+        """The report of an aero_rig_interfaces/ReadinessReport message."""
         return cls(
-            node=str(d["node"]),
-            ready=bool(d.get("ready", False)),
-            reason=str(d.get("reason", "")),
-            endpoints=tuple(Endpoint.from_dict(e) for e in d.get("endpoints", [])),
-            required_inputs=tuple(str(t) for t in d.get("required_inputs", [])),
-            records=tuple(str(t) for t in d.get("records", [])),
-            excluded=tuple(str(t) for t in d.get("excluded", [])),
+            node=str(msg.node),
+            ready=bool(msg.ready),
+            reason=str(msg.reason),
+            endpoints=tuple(
+                Endpoint.from_dict({f: getattr(e, f) for f in ENDPOINT_FIELDS})
+                for e in msg.endpoints
+            ),
+            required_inputs=tuple(str(t) for t in msg.required_inputs),
+            records=tuple(str(t) for t in msg.records),
+            excluded=tuple(str(t) for t in msg.excluded),
         )
 
 

@@ -9,7 +9,9 @@ of the contract too.
 The module imports nothing but the standard library and :mod:`rig_runtime.qos`, so the ROS
 launch files and offline tools can use it without loading a middleware.
 
-Types are ROS 2 interface names from ros-jazzy-common-interfaces; values on the wire are SI
+Types are ROS 2 interface names from ros-jazzy-common-interfaces and the rig's own
+aero_rig_interfaces (src/aero_rig_interfaces: the experiment's events, the identifier's models,
+the start barrier's reports and the control service); values on the wire are SI
 (angles in rad, pressures in Pa) as REP 103 asks. A node may offer another QoS where its
 parameters say so (``state_qos``, ``taps_qos``, the lift node's ``qos``); ``qos`` below is
 the profile every node of the project uses by default (names from :data:`rig_runtime.qos.PROFILES`).
@@ -37,11 +39,13 @@ __all__ = [
     "PRESSURE_TAPS",
     "PRESSURE_TARE",
     "RECORDED_TOPICS",
+    "SERVICES",
     "TOPICS",
     "WING_COEFFICIENTS",
     "WING_PROGRESS",
     "ActuatorLimits",
     "LimitsError",
+    "Service",
     "Topic",
     "joint_position",
 ]
@@ -96,28 +100,23 @@ WING_PROGRESS = Topic(
 )
 EXPERIMENT_PLAN = Topic(
     "/experiment/plan",
-    "std_msgs/msg/String",
+    "aero_rig_interfaces/msg/ExperimentPlan",
     "latched",
-    "the whole experiment plan as JSON (multisine_gen.plan_format); every sample rebuildable",
+    "the experiment plan: id, revision, t0, rate, levels and realizations as fields, the whole "
+    "plan as JSON in plan_json (multisine_gen.plan_format); every sample rebuildable",
 )
 EXPERIMENT_SEGMENT = Topic(
     "/experiment/segment",
-    "std_msgs/msg/String",
+    "aero_rig_interfaces/msg/SegmentEvent",
     "events",
-    "JSON event at each segment boundary of the plan, and plan_end (multisine_gen.plan_format)",
-)
-EXPERIMENT_CONTROL = Topic(
-    "/experiment/control",
-    "std_msgs/msg/String",
-    "events",
-    "adaptive runs: the identifier's JSON request to the generator after each measured period "
-    "(end the realization, finish the level, add a realization, go on; multisine_gen.revision)",
+    "an event at each segment boundary of the plan, plan_end or plan_aborted, and an adaptive "
+    "run's decisions on the control requests (multisine_gen.plan_format)",
 )
 EXPERIMENT_ANOMALY = Topic(
     "/experiment/anomaly",
-    "std_msgs/msg/String",
+    "aero_rig_interfaces/msg/Anomaly",
     "events",
-    "JSON record of a stretch of the experiment that must be excluded (rig_runtime.anomaly)",
+    "a stretch of the experiment that must be excluded, by stamp range (rig_runtime.anomaly)",
 )
 IDENTIFICATION_STATUS = Topic(
     "/identification/status",
@@ -127,15 +126,16 @@ IDENTIFICATION_STATUS = Topic(
 )
 IDENTIFICATION_MODEL = Topic(
     "/identification/model",
-    "std_msgs/msg/String",
+    "aero_rig_interfaces/msg/IdentificationModel",
     "latched",
-    "the latest models as JSON (BLA, clusters, linear SS, PNLSS, validation errors)",
+    "the latest models: refit, levels, clusters and Table 1's cells as fields, the whole record "
+    "(BLA, clusters, linear SS, PNLSS, predictions) as JSON in model_json",
 )
 GRAPH_READY = Topic(
     "/graph/ready",
-    "std_msgs/msg/String",
+    "aero_rig_interfaces/msg/ReadinessReport",
     "latched",
-    "each node's readiness report as JSON, for the start barrier (rig_runtime.barrier)",
+    "each node's readiness report, for the start barrier (rig_runtime.barrier)",
 )
 DIAGNOSTICS = Topic(
     "/diagnostics",
@@ -154,7 +154,6 @@ TOPICS: tuple[Topic, ...] = (
     WING_PROGRESS,
     EXPERIMENT_PLAN,
     EXPERIMENT_SEGMENT,
-    EXPERIMENT_CONTROL,
     EXPERIMENT_ANOMALY,
     IDENTIFICATION_STATUS,
     IDENTIFICATION_MODEL,
@@ -169,6 +168,26 @@ TOPICS: tuple[Topic, ...] = (
 RECORDED_TOPICS: tuple[Topic, ...] = tuple(
     t for t in TOPICS if t not in (PITCH_STOP, PRESSURE_TARE, WING_PROGRESS, GRAPH_READY)
 )
+
+
+
+@dataclass(frozen=True)
+class Service:
+    """One service of the graph: name, ROS 2 type, and what it does."""
+
+    name: str
+    type: str
+    content: str
+
+
+EXPERIMENT_CONTROL = Service(
+    "/experiment/control",
+    "aero_rig_interfaces/srv/ControlExperiment",
+    "adaptive runs: the identifier's request to the generator after each measured period (end "
+    "the realization, finish the level, add a realization, go on; multisine_gen.revision); the "
+    "generator answers accepted or refused with its reason, and refuses outside an adaptive run",
+)
+SERVICES: tuple[Service, ...] = (EXPERIMENT_CONTROL,)
 
 # Joint names in sensor_msgs/JointState.
 PITCH_JOINT = "pitch"  # the wing's pitch angle (geometric angle of attack) [rad]

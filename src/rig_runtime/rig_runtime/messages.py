@@ -1,20 +1,24 @@
 """ROS 2 messages by type name, backed by the rosbags Jazzy typestore.
 
-One typestore (``rosbags.typesys.get_typestore(Stores.ROS2_JAZZY)``) is the single source of
-message definitions for the nodes' serialized endpoints, the recorder and offline fits:
-messages are the typestore's dataclasses (numpy arrays for primitive sequences, nested
-dataclasses for headers), CDR bytes come from its ``serialize_cdr``.
+One typestore (``rosbags.typesys.get_typestore(Stores.ROS2_JAZZY)`` with the rig's own types
+from aero_rig_interfaces' ``.msg`` files registered) is the single source of message
+definitions for the nodes' serialized endpoints, the recorder and offline fits: messages are
+the typestore's dataclasses (numpy arrays for primitive sequences, nested dataclasses for
+headers), CDR bytes come from its ``serialize_cdr``.
 """
 
 import dataclasses
 import functools
+import os
 import struct
+import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from rosbags.serde import SerdeError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Nodetype, Typestore
 
 _NUMPY_DTYPES = {
@@ -38,10 +42,36 @@ class MessageTypeError(ValueError):
     """A message type name that the Jazzy typestore does not know."""
 
 
+
+INTERFACES_PACKAGE = "aero_rig_interfaces"
+
+
+def interface_msg_dir() -> Path:
+    """The folder of aero_rig_interfaces' ``.msg`` files: the installed package's (an ament
+    prefix's ``share/``, the venv's), else the source checkout's (offline tools without a
+    build)."""
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    candidates = [Path(p) / "share" / INTERFACES_PACKAGE / "msg" for p in (*prefixes, sys.prefix)]
+    candidates.append(Path(__file__).resolve().parents[2] / INTERFACES_PACKAGE / "msg")
+    for folder in candidates:
+        if folder.is_dir() and any(folder.glob("*.msg")):
+            return folder
+    raise MessageTypeError(
+        f"no {INTERFACES_PACKAGE} message definitions in {[str(c) for c in candidates]}"
+    )
+
+
 @functools.cache
 def typestore() -> Typestore:
-    """The process-wide ROS 2 Jazzy typestore (common_interfaces and friends)."""
-    return get_typestore(Stores.ROS2_JAZZY)
+    """The process-wide ROS 2 Jazzy typestore (common_interfaces and friends) with the rig's
+    own messages (aero_rig_interfaces) registered from their ``.msg`` files."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types: dict[str, Any] = {}
+    for path in sorted(interface_msg_dir().glob("*.msg")):
+        name = f"{INTERFACES_PACKAGE}/msg/{path.stem}"
+        types.update(get_types_from_msg(path.read_text(encoding="utf-8"), name))
+    store.register(types)
+    return store
 
 
 @functools.lru_cache(maxsize=1024)  # called per message: keep it a dictionary lookup
@@ -54,7 +84,7 @@ def normalize_type_name(type_name: str) -> str:
     if name not in typestore().fielddefs:
         raise MessageTypeError(
             f"unknown message type {type_name!r}: the runtime knows the ROS 2 Jazzy "
-            "common_interfaces types (e.g. 'sensor_msgs/msg/JointState')"
+            "common_interfaces types (e.g. 'sensor_msgs/msg/JointState') and aero_rig_interfaces'"
         )
     return name
 

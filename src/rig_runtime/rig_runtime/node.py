@@ -312,17 +312,16 @@ class Node(rclpy.node.Node):
     def anomalies(self) -> AnomalyLog:
         """This node's anomaly log: records go to /experiment/anomaly and to the log."""
         if self._anomalies is None:
-            from std_msgs.msg import String
+            from aero_rig_interfaces.msg import Anomaly as AnomalyMsg
 
             from .qos_profiles import topic_qos
 
-            pub = self.create_publisher(
-                String, EXPERIMENT_ANOMALY.name, topic_qos(EXPERIMENT_ANOMALY)
-            )
+            topic, qos = EXPERIMENT_ANOMALY.name, topic_qos(EXPERIMENT_ANOMALY)
+            pub = self.create_publisher(AnomalyMsg, topic, qos)
 
             def send(anomaly: Anomaly) -> None:
                 self.logger.warning("anomaly: %s", anomaly.describe())
-                pub.publish(String(data=anomaly.to_json()))
+                pub.publish(AnomalyMsg(**anomaly.to_fields()))
 
             self._anomalies = AnomalyLog(self.fq_name, send)
         return self._anomalies

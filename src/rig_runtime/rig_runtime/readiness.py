@@ -25,7 +25,7 @@ class Readiness:
         self.required_inputs: list[str] = []  # create_subscription(required=True)
         self.records: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
         self._pub: CdrPublisher | None = None
-        self._last_report = ""
+        self._last_report: ReadinessReport | None = None
         self._last_signature: object = None
 
     def set_ready(self, ready: bool, reason: str = "") -> None:
@@ -70,11 +70,11 @@ class Readiness:
         # The anomaly writer exists before the node reports ready, so the barrier sees it matched
         # to the identifier and the recorder: a first anomaly record is never sent into the void.
         _ = node.anomalies
-        from std_msgs.msg import String
+        from aero_rig_interfaces.msg import ReadinessReport as ReportMsg
 
         from .qos_profiles import topic_qos
 
-        self._pub = node.create_publisher(String, GRAPH_READY.name, topic_qos(GRAPH_READY))
+        self._pub = node.create_publisher(ReportMsg, GRAPH_READY.name, topic_qos(GRAPH_READY))
         self.announce()
         node.create_timer(period_s, self.announce)
 
@@ -85,7 +85,9 @@ class Readiness:
         if signature == self._last_signature:
             return
         self._last_signature = signature
-        text = self.report().to_json()
-        if text != self._last_report:
-            self._last_report = text
-            self._pub.publish(self._pub.handle.msg_type(data=text))
+        report = self.report()
+        if report != self._last_report:
+            self._last_report = report
+            from aero_rig_interfaces.msg import Endpoint as EndpointMsg
+
+            self._pub.publish(report.to_message(self._pub.handle.msg_type, EndpointMsg))
