@@ -1,5 +1,11 @@
-"""`colcon build` and `colcon test` work on the workspace (colcon-common-extensions, no ROS)."""
+"""`colcon build` and `colcon test` work on the workspace (colcon-common-extensions, no ROS).
 
+Without a sourced ROS the ament_cmake interface package builds against the venv's ROS 2 wheels,
+as src/aero_rig_interfaces/build_in_venv.sh does: the venv is the ament prefix, and the wheels'
+include folders are pointed at this Python's (cmake/wheel_include_dirs.cmake).
+"""
+
+import glob
 import os
 import shutil
 import subprocess
@@ -9,7 +15,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+INTERFACES = ROOT / "src" / "aero_rig_interfaces"
 PACKAGES = [
+    "aero_rig_interfaces",
     "rig_runtime",
     "rig_testing",
     "multisine_gen",
@@ -26,6 +34,21 @@ def _colcon(tmp: Path, *args: str) -> subprocess.CompletedProcess[str]:
     if colcon is None:
         pytest.fail("colcon is not installed in the virtual environment (make test installs it)")
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}:{os.environ['PATH']}")
+    if args[0] == "build" and not os.environ.get("ROS_DISTRO"):
+        libs = glob.glob(f"{sys.prefix}/lib/python*/site-packages/ros_*.libs")
+        env.update(
+            AMENT_PREFIX_PATH=sys.prefix,
+            CMAKE_PREFIX_PATH=sys.prefix,
+            LD_LIBRARY_PATH=":".join([f"{sys.prefix}/lib", *libs, env.get("LD_LIBRARY_PATH", "")]),
+            _ROS_WHEELS_BOOTSTRAP_COMPLETE="1",
+        )
+        args = (
+            *args,
+            "--cmake-args",
+            f"-DPython3_EXECUTABLE={sys.executable}",
+            f"-DCMAKE_PROJECT_INCLUDE={INTERFACES / 'cmake' / 'wheel_include_dirs.cmake'}",
+            "-DBUILD_TESTING=OFF",
+        )
     common = [
         "--base-paths",
         str(ROOT / "src"),
@@ -61,6 +84,10 @@ def test_colcon_build_and_test(tmp_path: Path) -> None:
             / pkg
         ).exists()
     assert (tmp_path / "install" / "rig_runtime" / "lib" / "rig_runtime" / "recorder").exists()
+    # The interface package: its definitions and its Python types, as a ROS install has them.
+    iface = tmp_path / "install" / "aero_rig_interfaces"
+    assert (iface / "share" / "aero_rig_interfaces" / "srv" / "ControlExperiment.srv").exists()
+    assert list(iface.glob("lib/python3*/site-packages/aero_rig_interfaces/msg/_segment_event.py"))
     # The unit tests that need no processes, run the way a ROS developer runs them.
     test = _colcon(
         tmp_path,

@@ -31,9 +31,17 @@ MIDDLEWARE = (
     "diagnostic_msgs",
     "sensor_msgs",
     "geometry_msgs",
+    "aero_rig_interfaces",
 )
 # ROS packages a module may import only if its package.xml declares them.
-ROS_PACKAGES = ("rclpy", "std_msgs", "diagnostic_msgs", "sensor_msgs", "geometry_msgs")
+ROS_PACKAGES = (
+    "rclpy",
+    "std_msgs",
+    "diagnostic_msgs",
+    "sensor_msgs",
+    "geometry_msgs",
+    "aero_rig_interfaces",
+)
 ALGORITHM_PACKAGES = ("multisine_gen", "wing_sim", "aero_identification")
 
 
@@ -58,11 +66,12 @@ def _declared(package: str) -> set[str]:
     return {e.text or "" for e in root.iter() if e.tag in ("depend", "exec_depend")}
 
 
-def test_the_workspace_has_its_eight_packages() -> None:
+def test_the_workspace_has_its_nine_packages() -> None:
     assert PACKAGES == sorted(
         [
             "aero_identification",
             "aero_rig",
+            "aero_rig_interfaces",  # ament_cmake: the rig's messages and service
             "multisine_gen",
             "pitch_actuator",
             "pressure_scanner",

@@ -13,15 +13,15 @@ feedback), so the experiment cannot start against a controller that is off or un
 Commands not followed exactly and watchdog trips are reported on ``/experiment/anomaly``.
 """
 
-import json
 import math
 import sys
 import time
 from collections.abc import Sequence
 from typing import Any
 
-from std_msgs.msg import Bool, String
+from std_msgs.msg import Bool
 
+from aero_rig_interfaces.msg import SegmentEvent
 from rig_runtime import Node, Parameter, new_message, run_node, set_stamp, stamp_to_ns
 from rig_runtime.interface import (
     EXPERIMENT_SEGMENT,
@@ -117,7 +117,7 @@ class HwActuatorNode(Node):
         self.create_subscription(Bool, PITCH_STOP.name, self.on_stop, DEFAULT_QOS)
         # The silence after the plan's last command is its end, not a lost stream.
         self.create_subscription(
-            String, EXPERIMENT_SEGMENT.name, self.on_segment, topic_qos(EXPERIMENT_SEGMENT)
+            SegmentEvent, EXPERIMENT_SEGMENT.name, self.on_segment, topic_qos(EXPERIMENT_SEGMENT)
         )
         self.create_timer(1.0 / p["update_rate_hz"], self.on_timer)
         self.create_timer(p["diagnostics_period_s"], self.update_link_diagnostics)
@@ -150,8 +150,8 @@ class HwActuatorNode(Node):
         )
         self._send(setpoint_deg)
 
-    def on_segment(self, msg: String) -> None:
-        if json.loads(msg.data).get("event") == "plan_end":
+    def on_segment(self, msg: SegmentEvent) -> None:
+        if msg.event == "plan_end":
             self.governor.end_stream(self._now(), "the plan has ended")
 
     def on_stop(self, msg: Bool) -> None:

@@ -19,15 +19,15 @@ refused, rate limited, held) and every jump of the command stamps (``time_discon
 identification excludes the periods they touch.
 """
 
-import json
 import math
 import sys
 import time
 from collections.abc import Sequence
 from typing import Any
 
-from std_msgs.msg import Bool, String
+from std_msgs.msg import Bool
 
+from aero_rig_interfaces.msg import SegmentEvent
 from rig_runtime import Node, Parameter, new_message, run_node, set_stamp, stamp_to_ns
 from rig_runtime.interface import (
     ALPHA_TRUE_JOINT,
@@ -116,7 +116,7 @@ class SimActuatorNode(Node):
         # After the plan's end the generator may leave: running on is then the expected end of
         # the run, not an anomaly of the experiment.
         self.create_subscription(
-            String, EXPERIMENT_SEGMENT.name, self.on_segment, topic_qos(EXPERIMENT_SEGMENT)
+            SegmentEvent, EXPERIMENT_SEGMENT.name, self.on_segment, topic_qos(EXPERIMENT_SEGMENT)
         )
         self.plan_ended = False
         self.t_origin_ns: int | None = None
@@ -156,8 +156,8 @@ class SimActuatorNode(Node):
         self.tracking.command(stamp_ns, math.degrees(commanded), math.degrees(setpoint))
         self._step_and_publish(setpoint, stamp_ns)
 
-    def on_segment(self, msg: String) -> None:
-        if json.loads(msg.data).get("event") == "plan_end":
+    def on_segment(self, msg: SegmentEvent) -> None:
+        if msg.event == "plan_end":
             self.plan_ended = True
             # The silence after the last command is the plan's end, not a lost stream.
             self.governor.end_stream(self.governor.t_s, "the plan has ended")

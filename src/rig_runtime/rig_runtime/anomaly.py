@@ -4,10 +4,10 @@ Any node that knows that a stretch of the stream is not what the plan asked for 
 ran on without commands, its watchdog tripped, a command was clamped or refused, a scanner frame
 was lost, a state had no finite pitch, the lift had no pitch for a taps sample, ...) publishes
 an :class:`Anomaly` on ``/experiment/anomaly`` (aero_rig_interfaces/Anomaly, "events" QoS:
-reliable, keep-last 1000). The identifier and the offline fit exclude every period and sine record whose
-stamps the range touches and name the anomaly in their reports; the recorder keeps them in the
-bag. An episode whose end is not known yet (a free-run in progress) is published open
-(``last_ns`` null) and published again, under the same ``id``, when it ends.
+reliable, keep-last 1000). The identifier and the offline fit exclude every period and sine
+record whose stamps the range touches and name the anomaly in their reports; the recorder
+keeps them in the bag. An episode whose end is not known yet (a free-run in progress) is
+published open (``open`` true) and published again, under the same ``id``, when it ends.
 
 This module is plain data (no middleware): the identification reads it as well.
 """

@@ -7,8 +7,9 @@ first samples at every reader that is still being discovered (the first wave's 1
 samples under load). Instead:
 
 - Every node publishes a :class:`ReadinessReport` on ``/graph/ready``
-  (aero_rig_interfaces/ReadinessReport, reliable + transient-local, as a latched topic in ROS 2): whether the node itself is ready
-  (its application's own condition, e.g. a driver's link), and for each of its readers and
+  (aero_rig_interfaces/ReadinessReport, reliable + transient-local, as a latched topic in
+  ROS 2): whether the node itself is ready (its application's own condition, e.g. a driver's
+  link), and for each of its readers and
   writers the topic, the QoS, its GID and the GIDs of the endpoints it has matched (with
   rclpy, which does not expose matched GIDs, only the matched counts). It publishes again
   whenever that changes.

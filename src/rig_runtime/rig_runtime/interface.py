@@ -170,7 +170,6 @@ RECORDED_TOPICS: tuple[Topic, ...] = tuple(
 )
 
 
-
 @dataclass(frozen=True)
 class Service:
     """One service of the graph: name, ROS 2 type, and what it does."""

@@ -42,7 +42,6 @@ class MessageTypeError(ValueError):
     """A message type name that the Jazzy typestore does not know."""
 
 
-
 INTERFACES_PACKAGE = "aero_rig_interfaces"
 
 

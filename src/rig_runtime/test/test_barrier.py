@@ -1,7 +1,5 @@
 """The start barrier's decision (barrier.py), in-process: reports in, problems out."""
 
-import pytest
-
 from rig_runtime.barrier import Endpoint, ReadinessReport, StartBarrier, compatible
 from rig_runtime.interface import GRAPH_READY
 from rig_runtime.messages import deserialize, new_message, serialize
