@@ -61,10 +61,12 @@ import yaml
 from rosbags.highlevel import AnyReader
 
 from aero_rig.verdict import STREAM_TOPICS
+from multisine_gen.plan import ExperimentPlan
+from multisine_gen.plan_format import read_plan_message
 from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import EXPERIMENT_PLAN
 from rig_runtime.launcher import Launcher, node_command
-from rig_runtime.messages import stamp_to_ns
+from rig_runtime.messages import stamp_to_ns, typestore
 from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 from rig_testing.processes import (
     BusyProcesses,
@@ -288,24 +290,23 @@ def measure(run: Path, reference: Path | None) -> dict[str, Any]:
     """Samples lost in the bag, what the identification excluded, Table 1 against idle."""
     figures: dict[str, Any] = {}
     stamps: dict[str, set[int]] = {t: set() for t in STREAM_TOPICS}
-    plan: dict[str, Any] | None = None
+    plan: tuple[ExperimentPlan, int] | None = None  # the last plan message's, and its t0_ns
     try:
-        with AnyReader([run / "bag"]) as reader:
+        with AnyReader([run / "bag"], default_typestore=typestore()) as reader:
             conns = [
                 c for c in reader.connections if c.topic in (*STREAM_TOPICS, EXPERIMENT_PLAN.name)
             ]
             for conn, _, raw in reader.messages(connections=conns):
                 msg: Any = reader.deserialize(raw, conn.msgtype)
                 if conn.topic == EXPERIMENT_PLAN.name:
-                    plan = json.loads(msg.data)
+                    plan = read_plan_message(msg)
                 else:
                     stamps[conn.topic].add(stamp_to_ns(msg.header.stamp))
     except Exception as exc:  # a bag cut by the fault: say so
         figures["bag_error"] = f"{type(exc).__name__}: {exc}"
     if plan is not None:
-        expected = {
-            plan["t0_ns"] + round(k * 1e9 / plan["fs"]) for k in range(plan["total_samples"])
-        }
+        executed, t0_ns = plan
+        expected = {t0_ns + round(k * 1e9 / executed.fs) for k in range(executed.total_samples)}
         figures["samples_lost"] = {t: len(expected - stamps[t]) for t in STREAM_TOPICS}
     else:
         figures["samples_lost"] = "no plan in the bag (nothing was streamed)"

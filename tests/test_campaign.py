@@ -22,10 +22,13 @@ from graph_support import (
 )
 from rosbags.highlevel import AnyReader
 
+from multisine_gen.plan_format import read_plan_message, segment_event_from_message
 from rig_runtime.interface import (
-    EXPERIMENT_CONTROL,
+    EXPERIMENT_ANOMALY,
     EXPERIMENT_PLAN,
     EXPERIMENT_SEGMENT,
+    IDENTIFICATION_MODEL,
+    IDENTIFICATION_STATUS,
     PITCH_COMMAND,
     PITCH_STATE,
     PRESSURE_TAPS,
@@ -47,6 +50,7 @@ from rig_testing.processes import (
 )
 
 CLI = (sys.executable, "-m", "aero_rig.cli")
+STRING = "std_msgs/msg/String"  # what the events, plan and models were before aero_rig_interfaces
 RTF5 = ("--real-time-factor", "5")
 TIMEOUT_600 = ("--timeout", "600")
 
@@ -132,14 +136,79 @@ def test_campaign_ends_by_itself_with_report(campaign) -> None:
     assert "still published" not in (run / "logs" / "recorder.log").read_text()
 
 
+# The fields of each recorded type (rig_runtime.interface; aero_rig_interfaces' .msg files) that
+# a message decoded by mcap-ros2-support must have.
+DECODED_FIELDS: dict[str, tuple[str, ...]] = {
+    PITCH_COMMAND.type: ("header", "name", "position", "velocity"),
+    PRESSURE_TAPS.type: ("header", "fields", "point_step", "data"),
+    WING_COEFFICIENTS.type: ("header", "vector"),
+    EXPERIMENT_PLAN.type: (
+        "header", "plan_id", "revision", "t0_ns", "fs", "samples", "levels", "realizations",
+        "offsets_deg", "adaptive", "plan_json",
+    ),
+    EXPERIMENT_SEGMENT.type: (
+        "header", "event", "t0_ns", "index", "kind", "start_k", "length", "level", "period",
+        "start_stamp_s", "end_stamp_s", "samples", "fs", "at_k", "request", "after_k", "why",
+    ),
+    EXPERIMENT_ANOMALY.type: ("id", "node", "kind", "first_ns", "open", "last_ns", "detail"),
+    IDENTIFICATION_STATUS.type: ("header", "status"),
+    IDENTIFICATION_MODEL.type: (
+        "header", "refit", "complete", "selected_class", "levels", "table1", "table1_level1",
+        "warnings", "model_json",
+    ),
+}  # fmt: skip
+
+
+def _decode_every_message(bag: Path, total_samples: int) -> dict[str, int]:
+    """Decode every message of every file of ``bag`` with mcap-ros2-support, check its fields
+    (DECODED_FIELDS, the nested LevelSummary and TableCell too) and that the rig's readers take
+    the rig's messages so decoded; the messages decoded per topic."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from aero_identification.model_message import model_from_message
+    from rig_runtime.anomaly import Anomaly
+
+    counts: dict[str, int] = {}
+    for path in sorted(bag.glob("*.mcap")):
+        with path.open("rb") as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            for schema, channel, _, decoded in reader.iter_decoded_messages():
+                assert schema is not None and schema.encoding == "ros2msg", channel.topic
+                assert channel.message_encoding == "cdr", channel.topic
+                absent = [f for f in DECODED_FIELDS[schema.name] if not hasattr(decoded, f)]
+                assert not absent, (channel.topic, schema.name, absent)
+                counts[channel.topic] = counts.get(channel.topic, 0) + 1
+                if schema.name == EXPERIMENT_PLAN.type:
+                    assert decoded.plan_id and decoded.t0_ns > 0, decoded.plan_id
+                    revision, _ = read_plan_message(decoded)
+                    assert revision.revision == decoded.revision
+                    assert revision.total_samples == total_samples or decoded.adaptive
+                elif schema.name == EXPERIMENT_SEGMENT.type:
+                    assert segment_event_from_message(decoded)["event"] == decoded.event
+                elif schema.name == EXPERIMENT_ANOMALY.type:
+                    assert Anomaly.from_message(decoded).kind == decoded.kind
+                elif schema.name == IDENTIFICATION_MODEL.type:
+                    assert model_from_message(decoded)["refit"] == decoded.refit
+                    for level in decoded.levels:
+                        assert hasattr(level, "cluster_sizes") and hasattr(level, "role")
+                    for cell in [*decoded.table1, *decoded.table1_level1]:
+                        assert hasattr(cell, "error") and hasattr(cell, "spread")
+    return counts
+
+
 def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
     run, _ = campaign
     stamps: dict[str, list[int]] = {}
     with AnyReader([run / "bag"]) as reader:
-        topics = {c.topic for c in reader.connections}
-        # /experiment/control has a writer only in an adaptive run (its own test checks it);
-        # the recorder learns a topic's type and QoS from its writers.
-        assert {t.name for t in RECORDED_TOPICS} - {EXPERIMENT_CONTROL.name} <= topics
+        connections = list(reader.connections)
+        topics = {c.topic for c in connections}
+        assert {t.name for t in RECORDED_TOPICS} <= topics
+        # Every topic has its interface type (rig_runtime.interface): no JSON in a String.
+        assert {c.topic: c.msgtype for c in reader.connections} == {
+            t.name: t.type for t in RECORDED_TOPICS if t.name in topics
+        }
+        assert not [c.topic for c in reader.connections if c.msgtype == STRING]
         conns = [
             c
             for c in reader.connections
@@ -151,15 +220,21 @@ def test_bag_holds_every_topic_and_no_sample_lost(campaign) -> None:
             stamps.setdefault(conn.topic, []).append(stamp_to_ns(msg.header.stamp))
         plan_conn = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
         plan_msg: Any = reader.deserialize(
-            next(reader.messages(plan_conn))[2], "std_msgs/msg/String"
+            next(reader.messages(plan_conn))[2], EXPERIMENT_PLAN.type
         )
-        plan = json.loads(plan_msg.data)
+        plan, _ = read_plan_message(plan_msg)
     commands = np.array(stamps[PITCH_COMMAND.name])
-    assert len(commands) == plan["total_samples"]
+    assert len(commands) == plan.total_samples
     assert len(np.unique(commands)) == len(commands)
     coefficients = set(stamps[WING_COEFFICIENTS.name])
     missing = [s for s in commands if s not in coefficients]
     assert not missing, f"{len(missing)} command samples have no coefficients sample"
+    # A tool that knows only the bag (Foxglove's MCAP ROS 2 decoder) decodes every message into
+    # its fields, from the definitions the recorder embeds (rig_runtime.bag); the rig's readers
+    # take its messages as they take rosbags' and rclpy's.
+    assert {t.type for t in RECORDED_TOPICS} <= set(DECODED_FIELDS)
+    decoded_counts = _decode_every_message(run / "bag", plan.total_samples)
+    assert decoded_counts == {c.topic: c.msgcount for c in connections if c.msgcount}
 
 
 def test_every_view_of_the_rrd_holds_what_the_identification_sent(campaign) -> None:
@@ -566,8 +641,6 @@ def adaptive_campaign(
 
 def _bag_plans_and_commands(bag: Path) -> tuple[list[Any], list[dict[str, Any]], np.ndarray]:
     """The bag's /experiment/plan revisions, its decision events and its commands [deg]."""
-    from multisine_gen.plan_format import read_plan_message
-
     plans, decisions, commands = [], [], []
     with AnyReader([bag]) as reader:
         conns = [
@@ -578,9 +651,9 @@ def _bag_plans_and_commands(bag: Path) -> tuple[list[Any], list[dict[str, Any]],
         for conn, _, raw in reader.messages(connections=conns):
             msg: Any = reader.deserialize(raw, conn.msgtype)
             if conn.topic == EXPERIMENT_PLAN.name:
-                plans.append(read_plan_message(msg.data)[0])
+                plans.append(read_plan_message(msg)[0])
             elif conn.topic == EXPERIMENT_SEGMENT.name:
-                event = json.loads(msg.data)
+                event = segment_event_from_message(msg)
                 if event.get("event") in ("decision", "refused"):
                     decisions.append(event)
             else:
@@ -602,11 +675,12 @@ def test_adaptive_campaign_is_clean_and_its_bag_reproduces_the_executed_plan(
     assert account["levels"]["low"]["executed_periods"] == [2, 2]
     assert account["multisine_executed_s"] < account["multisine_planned_s"]
     plans, decisions, commands = _bag_plans_and_commands(run / "bag")
-    with AnyReader([run / "bag"]) as reader:
-        control = [c for c in reader.connections if c.topic == EXPERIMENT_CONTROL.name]
-        requests = [json.loads(reader.deserialize(raw, c.msgtype).data)  # type: ignore[attr-defined]
-                    for c, _, raw in reader.messages(connections=control)]  # fmt: skip
-    assert requests and {r["action"] for r in requests} >= {"go_on", "end_realization"}
+    # /experiment/control is a service: the generator records each request it answered, with
+    # what it did, as a decision or refused event on /experiment/segment.
+    assert {d["request"] for d in decisions} >= {"go_on", "end_realization"}
+    for d in decisions:  # requests of the identifier (aero_identification): none malformed
+        assert isinstance(d["level"], int) and isinstance(d["after_k"], int), d
+        assert isinstance(d["at_k"], int) and isinstance(d["reason"], str), d
     executed = max(plans, key=lambda p: p.revision)
     assert executed.revision == account["revision"] == plans[-1].revision
     # Every revision has its decision event, with the request's reason; every sample the

@@ -18,6 +18,7 @@ import pytest
 import yaml
 from rosbags.highlevel import AnyReader
 
+from multisine_gen.plan_format import segment_event_from_message
 from rig_runtime import Node
 from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import (
@@ -192,7 +193,7 @@ def test_a_free_running_actuator_is_reported_excluded_and_fails_the_campaign(
     watcher.create_subscription(
         EXPERIMENT_SEGMENT.type,
         EXPERIMENT_SEGMENT.name,
-        lambda m: events.append(json.loads(m.data)),
+        lambda m: events.append(segment_event_from_message(m)),
         "events",
     )
     run = tmp_path / "run"

@@ -1,20 +1,20 @@
 """Generator (the small plan) drives the simulated actuator, as separate processes on DDS."""
 
-import json
 from pathlib import Path
 
 import numpy as np
 from graph_support import Observer, PeerReaders, small_plan_design
 
+from multisine_gen.plan_format import read_plan_message, segment_event_from_message
 from pitch_actuator.dynamics import ActuatorModel
 from rig_runtime.interface import EXPERIMENT_PLAN, EXPERIMENT_SEGMENT, PITCH_COMMAND, PITCH_STATE
 from rig_testing.processes import Processes, graph_env, join_graph
 
 TOPICS = {
-    PITCH_COMMAND.name: ("sensor_msgs/msg/JointState", "stream"),
-    PITCH_STATE.name: ("sensor_msgs/msg/JointState", "stream"),
-    EXPERIMENT_SEGMENT.name: ("std_msgs/msg/String", "events"),
-    EXPERIMENT_PLAN.name: ("std_msgs/msg/String", "latched"),
+    PITCH_COMMAND.name: (PITCH_COMMAND.type, "stream"),
+    PITCH_STATE.name: (PITCH_STATE.type, "stream"),
+    EXPERIMENT_SEGMENT.name: (EXPERIMENT_SEGMENT.type, "events"),
+    EXPERIMENT_PLAN.name: (EXPERIMENT_PLAN.type, "latched"),
 }
 
 
@@ -62,7 +62,7 @@ def test_generator_drives_sim_actuator_every_sample_once(
                     # fragmented, which under load can arrive after the last command.
                     and len(observer.data[EXPERIMENT_PLAN.name]) >= 1
                     and any(
-                        json.loads(m.data).get("event") == "plan_end"
+                        segment_event_from_message(m)["event"] == "plan_end"
                         for _, m in observer.data[EXPERIMENT_SEGMENT.name]
                     )
                 ),
@@ -81,8 +81,9 @@ def test_generator_drives_sim_actuator_every_sample_once(
     assert np.all(np.diff(commands) == 5_000_000)
 
     # The plan on the wire rebuilds the commands exactly.
-    plan_json = json.loads(observer.data[EXPERIMENT_PLAN.name][0][1].data)
-    assert plan_json["total_samples"] == total
+    sent, _ = read_plan_message(observer.data[EXPERIMENT_PLAN.name][0][1])
+    assert sent.total_samples == total
+    np.testing.assert_array_equal(sent.command_deg(), plan.command_deg())
     cmd = np.array([m.position[0] for _, m in observer.data[PITCH_COMMAND.name]])
     np.testing.assert_allclose(np.degrees(cmd), plan.command_deg(), atol=1e-9)
 
@@ -99,6 +100,6 @@ def test_generator_drives_sim_actuator_every_sample_once(
     np.testing.assert_allclose(np.abs(Y / U), np.abs(expected), rtol=0.01)
     np.testing.assert_allclose(np.angle(Y / U / expected), 0.0, atol=0.01)
 
-    events = [json.loads(m.data) for _, m in observer.data[EXPERIMENT_SEGMENT.name]]
+    events = [segment_event_from_message(m) for _, m in observer.data[EXPERIMENT_SEGMENT.name]]
     starts = [e for e in events if e.get("event") == "start"]
     assert len(starts) == len(plan.segments)

@@ -7,7 +7,6 @@ commands are refused (a state still comes back for their stamp), and a lost comm
 Times below are experiment time: the states' stamps (5 ms apart at fs = 200 Hz).
 """
 
-import json
 import math
 import time
 from pathlib import Path
@@ -17,6 +16,7 @@ import numpy as np
 import pytest
 from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 
+from multisine_gen.plan_format import segment_event_fields
 from rig_runtime.interface import (
     ALPHA_TRUE_JOINT,
     EXPERIMENT_SEGMENT,
@@ -123,8 +123,9 @@ class ActuatorClient:
     def end_plan(self) -> None:
         """The generator's plan_end event (multisine_gen.generator_node)."""
         event = {"event": "plan_end", "samples": self.next_k, "fs": FS, "t0_ns": self.t0_ns}
-        self.segment_pub.publish(self.node.new_message("std_msgs/msg/String",
-                                                       data=json.dumps(event)))  # fmt: skip
+        msg = self.node.new_message(EXPERIMENT_SEGMENT.type, **segment_event_fields(event))
+        set_stamp(msg.header.stamp, self.stamp(self.next_k - 1))  # the plan's last sample
+        self.segment_pub.publish(msg)
 
     def request_stop(self, stop: bool = True) -> None:
         self.stop_pub.publish(self.node.new_message("std_msgs/msg/Bool", data=stop))

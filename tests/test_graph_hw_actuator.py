@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from graph_support import PeerReaders, subscribe_diagnostics, wait_diagnostics
 
+from multisine_gen.plan_format import segment_event_fields
 from rig_runtime.interface import (
     EXPERIMENT_SEGMENT,
     PITCH_COMMAND,
@@ -118,9 +119,10 @@ class HwClient:
     def end_plan(self) -> None:
         """The generator's plan_end event (multisine_gen.generator_node)."""
         event = {"event": "plan_end", "samples": len(self.sent), "fs": COMMAND_HZ}
-        self.segment_pub.publish(
-            self.node.new_message("std_msgs/msg/String", data=json.dumps(event))
-        )
+        msg = self.node.new_message(EXPERIMENT_SEGMENT.type, **segment_event_fields(event))
+        if self.sent:
+            set_stamp(msg.header.stamp, self.sent[-1][0])  # the last command's stamp
+        self.segment_pub.publish(msg)
 
     def series(self) -> tuple[np.ndarray, np.ndarray]:
         stamps = np.array([s for s, _ in self.states], dtype=np.int64)

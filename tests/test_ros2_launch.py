@@ -236,10 +236,13 @@ def test_rig_launch_starts_the_hardware_nodes_against_the_simulated_devices(
     # (DDS delivers commands in bursts) is reported as not tracked.
     from rosbags.highlevel import AnyReader
 
+    from rig_runtime.anomaly import Anomaly
+    from rig_runtime.interface import EXPERIMENT_ANOMALY
+
     with AnyReader([run_dir / "bag"]) as bag:
-        conns = [c for c in bag.connections if c.topic == "/experiment/anomaly"]
+        conns = [c for c in bag.connections if c.topic == EXPERIMENT_ANOMALY.name]
         kinds = [
-            json.loads(bag.deserialize(raw, c.msgtype).data)["kind"]  # type: ignore[attr-defined]
+            Anomaly.from_message(bag.deserialize(raw, c.msgtype)).kind
             for c, _, raw in bag.messages(connections=conns)
         ]
     assert "not_tracking" not in kinds, kinds

@@ -2,8 +2,9 @@
 worker and the status.
 
 identifier_node.py is the rclpy shell around :class:`IdentificationSession`: it declares the
-parameters, subscribes the topics, hands the session each message's content, runs its timer,
-and publishes what the session gives it (:class:`SessionOutputs`). The parts:
+parameters, subscribes the topics, hands the session each message (the plan and anomaly
+messages as they come, a segment event as its payload), runs its timer, and publishes what the
+session gives it (:class:`SessionOutputs`). The parts:
 
 - :class:`Intake`: the plan's samples and anomalies, aligned into its periods (period_assembly.py),
   held while the plan is not there yet; holes in the plan index are named as they open.
@@ -65,7 +66,8 @@ class PeriodToJudge(NamedTuple):
 class SessionOutputs(Protocol):
     """What the session hands its node to publish, and the node's stop."""
 
-    def publish_model(self, payload: dict[str, Any]) -> None: ...
+    def publish_model(self, payload: dict[str, Any], stamp_ns: int) -> None:
+        """The models of a refit; ``stamp_ns``: the last plan sample its data had."""
 
     def publish_status(self) -> None: ...
 
@@ -237,6 +239,7 @@ class RefitJob:
     started: float  # time.monotonic() when it was submitted
     anomalies: int  # anomalies its data snapshot includes (Intake.anomalies_received)
     changes: int = 0  # RefitSchedule.changes when it was submitted
+    stamp_ns: int = 0  # the stamp of the last plan sample both channels had at its submission
 
 
 class RefitWorker:
@@ -381,19 +384,31 @@ class IdentificationSession:
         self.errors: list[str] = []
         self.final_done = False
         self.final_waits_said = False  # logged once: the final's data are in, a refit runs
+        self.not_adaptive_said = False  # logged once: the generator takes no requests
 
     # -- intake ---------------------------------------------------------------------------
-    def on_plan(self, text: str) -> None:
-        """A ``/experiment/plan`` message: the plan, or a revision of the running one."""
+    def on_plan(self, msg: Any) -> None:
+        """A ``/experiment/plan`` message (aero_rig_interfaces/ExperimentPlan, the std_msgs/String
+        of a bag recorded before it, or its JSON text): the plan, or a revision of the running
+        one."""
         try:
-            plan, t0_ns = read_plan_message(text)
+            plan, t0_ns = read_plan_message(msg)
         except PlanError as exc:
             self.logger.error("%s: %s; stopping", EXPERIMENT_PLAN.name, exc)
             self.outputs.stop(1)
             return
+        text = msg if isinstance(msg, str) else getattr(msg, "plan_json", getattr(msg, "data", ""))
+        # The generator's bounds, published only in an adaptive run (generator_node.py).
         adaptation = json.loads(text).get("adaptation")
-        if adaptation and self.judge is not None:
+        if self.judge is not None and adaptation:
             self.judge.bounds = adaptive.Bounds.from_dict(adaptation)
+        elif self.judge is not None and not self.not_adaptive_said:
+            self.not_adaptive_said = True
+            self.errors.append(
+                "the generator does not run adaptively (its parameter adaptive is false): it "
+                "refuses every request and plays its plan as designed"
+            )
+            self.logger.error("%s", self.errors[-1])
         asm = self.intake.assembler
         if asm is not None and t0_ns == asm.t0_ns:
             if plan.revision > asm.plan.revision:
@@ -427,10 +442,16 @@ class IdentificationSession:
             )
             self.logger.error("%s", self.errors[-1])
 
-    def on_anomaly(self, text: str) -> None:
-        """An ``/experiment/anomaly`` record (rig_runtime.anomaly)."""
+    def on_anomaly(self, msg: Any) -> None:
+        """An ``/experiment/anomaly`` record (rig_runtime.anomaly): an Anomaly, its message
+        (aero_rig_interfaces/Anomaly, or the std_msgs/String of an older bag) or its JSON."""
         try:
-            anomaly = Anomaly.from_json(text)
+            if isinstance(msg, Anomaly):
+                anomaly = msg
+            elif isinstance(msg, str):
+                anomaly = Anomaly.from_json(msg)
+            else:
+                anomaly = Anomaly.from_message(msg)
         except ValueError as exc:
             self.logger.error("%s", exc)
             return
@@ -510,10 +531,14 @@ class IdentificationSession:
             " [final]" if final else " [final models]" if final_models and not reuse else "",
         )
         anomalies = self.intake.anomalies_received
+        last_k = min(max(self.intake.have, 0), asm.total - 1)
+        stamp_ns = asm.t0_ns + round(last_k * asm.period_ns)
         future = self.worker.submit(
             asm, self.settings.config, final, self.settings.output_dir, reuse, final_models
         )
-        self.job = RefitJob(future, reason, final, started, anomalies, self.schedule.changes)
+        self.job = RefitJob(
+            future, reason, final, started, anomalies, self.schedule.changes, stamp_ns
+        )
 
     def collect(self) -> None:
         """The finished refit's result: publish the models, or keep the previous ones."""
@@ -544,7 +569,7 @@ class IdentificationSession:
         payload[model_payload.REFIT] = self.refits
         payload["refit_s"] = elapsed
         payload["reason"] = job.reason
-        self.outputs.publish_model(payload)
+        self.outputs.publish_model(payload, job.stamp_ns)
         worker = summary["worker"]
         self.logger.info(
             "refit %d done in %.2f s (%s; worker CPU %.2f s, resident %.0f MB at start, "

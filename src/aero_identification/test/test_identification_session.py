@@ -24,16 +24,24 @@ from aero_identification.identification_session import (
 )
 from aero_identification.identifier_settings import PARAMETERS, identifier_settings
 from aero_identification.period_assembly import CampaignAssembler
+from aero_rig_interfaces.msg import Anomaly as AnomalyMsg
+from aero_rig_interfaces.msg import ExperimentPlan as ExperimentPlanMsg
 from multisine_gen.campaigns import short_plan
 from multisine_gen.plan import ExperimentPlan
 from multisine_gen.plan_format import plan_message, segment_event
-from multisine_gen.revision import PlanRequest
+from multisine_gen.revision import Adaptation, PlanRequest
 from rig_runtime.anomaly import Anomaly
 from rig_runtime.params import default_parameters
 
 T0 = 1_000_000_000_000
 PLAN = short_plan(seed=4)
 LOGGER = "test.identifier"
+BOUNDS = Adaptation().to_dict()  # the generator's defaults, published in an adaptive run
+
+
+def _plan(adaptation: dict[str, int] | None = None, plan: ExperimentPlan = PLAN) -> Any:
+    """The /experiment/plan message the generator publishes (generator_node.py)."""
+    return ExperimentPlanMsg(**plan_message(plan, T0, adaptation, plan_id="short"))
 
 
 class Outputs:
@@ -41,12 +49,14 @@ class Outputs:
 
     def __init__(self) -> None:
         self.models: list[dict[str, Any]] = []
+        self.stamps: list[int] = []
         self.statuses = 0
         self.requests: list[PlanRequest] = []
         self.stops: list[int] = []
 
-    def publish_model(self, payload: dict[str, Any]) -> None:
+    def publish_model(self, payload: dict[str, Any], stamp_ns: int) -> None:
         self.models.append(payload)
+        self.stamps.append(stamp_ns)
 
     def publish_status(self) -> None:
         self.statuses += 1
@@ -136,7 +146,7 @@ def test_samples_before_the_plan_wait_for_it_and_those_beyond_the_bound_are_repo
     session = _session(outputs, max_early=5)
     _feed(session, range(7), "u")
     assert len(session.intake.early) == 5 and session.intake.early_dropped == 2
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan())
     assert session.intake.assembler is not None and not session.intake.early
     assert session.intake.samples == {"u": 5, "y": 0}
     assert session.errors == [
@@ -156,7 +166,7 @@ def test_an_unreadable_plan_stops_the_node() -> None:
 def test_a_hole_in_the_plan_index_is_a_gap_logged_at_once_and_counted(caplog: Any) -> None:
     outputs = Outputs()
     session = _session(outputs)
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(plan_message(PLAN, T0)["plan_json"])  # its text, as bags held
     with caplog.at_level(logging.WARNING, logger=LOGGER):
         _feed(session, [*range(10), *range(30, 40)], "u")
         _feed(session, range(40), "y")
@@ -174,7 +184,7 @@ def test_a_hole_in_the_plan_index_is_a_gap_logged_at_once_and_counted(caplog: An
 
 def test_gaps_beyond_the_logged_ones_are_counted_in_the_status_only(caplog: Any) -> None:
     session = _session(Outputs())
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan())
     gaps = MAX_LOGGED_GAPS + 2
     with caplog.at_level(logging.WARNING, logger=LOGGER):
         _feed(session, range(0, 2 * gaps + 1, 2), "y")  # every other sample: one-sample gaps
@@ -250,7 +260,7 @@ def stubbed(monkeypatch: pytest.MonkeyPatch) -> tuple[IdentificationSession, Out
     monkeypatch.setattr(refit_worker, "refit", _stub_refit(calls))
     outputs = Outputs()
     session = _session(outputs)
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan())
     return session, outputs, calls
 
 
@@ -272,6 +282,7 @@ def test_refits_start_when_their_data_are_in_and_the_final_one_stops_the_node(
     assert session.job is None and session.refits == 1 and not session.schedule.models_stale
     (model,) = outputs.models
     assert model["refit"] == 1 and model["reason"] == "level 0 realization 0 complete"
+    assert outputs.stamps == [_stamp(end_k)]  # the last sample its data had
     messages = [r.getMessage() for r in caplog.records]
     assert messages[0] == "refit 1 (level 0 realization 0 complete)"
     assert messages[1].startswith("refit 1 done in ")
@@ -302,7 +313,7 @@ def test_once_every_multisine_period_is_in_its_refit_fits_the_final_models(
     monkeypatch.setattr(refit_worker, "refit", _stub_refit(calls, final_models=final_models))
     outputs = Outputs()
     session = _session(outputs)
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan())
     multisines = [s for s in PLAN.segments if s.kind == "multisine"]
     last = multisines[-1]
     before = [s for s in multisines if (s.level, s.realization) != (last.level, last.realization)][
@@ -325,7 +336,8 @@ def test_once_every_multisine_period_is_in_its_refit_fits_the_final_models(
     assert calls[-1] == (False, False) and final_models[-1] is True
     assert caplog.records[-1].getMessage().endswith("complete) [final models]")
     if anomaly_meanwhile:  # may exclude periods those models were fitted on
-        session.on_anomaly(Anomaly("lift/invalid/1", "lift", "invalid", _stamp(5), None).to_json())
+        anomaly = Anomaly("lift/invalid/1", "lift", "invalid", _stamp(5), None)
+        session.on_anomaly(AnomalyMsg(**anomaly.to_fields()))  # as the node takes it
     session.on_timer()  # collects it
     assert session.schedule.models_stale is anomaly_meanwhile
     # The plan's end: the final identification validates those models, or fits afresh.
@@ -362,7 +374,7 @@ def test_an_adaptive_run_fits_no_final_models_before_its_end(
     final_models: list[bool] = []
     monkeypatch.setattr(refit_worker, "refit", _stub_refit(calls, final_models=final_models))
     session = _session(Outputs(), adaptive=True)
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan(BOUNDS))
     last = [s for s in PLAN.segments if s.kind == "multisine"][-1]
     _feed(session, range(last.start_k + last.length))
     session.on_segment(_end(last))
@@ -373,7 +385,7 @@ def test_an_adaptive_run_fits_no_final_models_before_its_end(
 def test_a_dead_worker_is_replaced_and_its_job_queued_again() -> None:
     outputs = Outputs()
     session = _session(outputs)
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan())
     restarts: list[bool] = []
 
     class DeadWorker:
@@ -407,7 +419,7 @@ def test_an_anomaly_during_the_final_identification_runs_it_again(
 ) -> None:
     session, outputs, calls = stubbed
     session.start_refit(True, "plan end")
-    session.on_anomaly(Anomaly("lift/invalid/1", "lift", "invalid", _stamp(3000), None).to_json())
+    session.on_anomaly(Anomaly("lift/invalid/1", "lift", "invalid", _stamp(3000), None))
     session.collect()
     assert not session.final_done and outputs.stops == []
     assert session.schedule.pending == [
@@ -453,7 +465,7 @@ def test_an_adaptive_session_judges_each_period_once_its_data_are_in(caplog: Any
     outputs = Outputs()
     session = _session(outputs, adaptive=True)
     adaptation = {"min_periods": 2, "min_realizations": 3, "max_realizations": 4}
-    session.on_plan(plan_message(PLAN, T0, adaptation))
+    session.on_plan(_plan(adaptation))
     assert session.judge is not None and session.judge.bounds.min_realizations == 3
     periods = [_segment(PLAN, "multisine", 0, 0, p) for p in (0, 1)]
     for segment in periods:
@@ -481,7 +493,7 @@ def test_an_adaptive_session_judges_each_period_once_its_data_are_in(caplog: Any
 def test_rules_that_fail_leave_the_generator_going_on(caplog: Any) -> None:
     outputs = Outputs()
     session = _session(outputs, adaptive=True)
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan(BOUNDS))
     assert session.judge is not None and session.intake.assembler is not None
     with caplog.at_level(logging.ERROR, logger=LOGGER):
         session.send_verdicts(session.intake.assembler, PeriodToJudge(10, 0, 9, 0))
@@ -493,7 +505,7 @@ def test_rules_that_fail_leave_the_generator_going_on(caplog: Any) -> None:
 def test_a_request_that_cannot_be_sent_leaves_the_later_periods_waiting() -> None:
     outputs = Outputs()
     session = _session(outputs, adaptive=True)
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan(BOUNDS))
     periods = [_segment(PLAN, "multisine", 0, 0, p) for p in (0, 1)]
     for segment in periods:
         session.on_segment(_end(segment))
@@ -514,8 +526,26 @@ def test_a_request_that_cannot_be_sent_leaves_the_later_periods_waiting() -> Non
     assert {r.after_k for r in outputs.requests} == {periods[1].start_k + periods[1].length - 1}
 
 
+def test_an_adaptive_session_says_once_that_the_generator_takes_no_requests(
+    caplog: Any,
+) -> None:
+    """The plan of a generator whose parameter adaptive is false has no bounds: every request
+    will be refused (generator_node.NOT_ADAPTIVE), an error in the status."""
+    session = _session(Outputs(), adaptive=True)
+    with caplog.at_level(logging.ERROR, logger=LOGGER):
+        session.on_plan(_plan())
+        session.on_plan(_plan())
+    (record,) = caplog.records
+    assert record.getMessage().startswith("the generator does not run adaptively")
+    level, values = session.status([])
+    assert level == 2 and values["errors"] == record.getMessage()
+    fixed = _session(Outputs())
+    fixed.on_plan(_plan())
+    assert not fixed.errors
+
+
 def test_a_fixed_plan_run_judges_nothing() -> None:
     session = _session(Outputs())
-    session.on_plan(plan_message(PLAN, T0))
+    session.on_plan(_plan())
     session.on_segment(_end(_segment(PLAN, "multisine", 0, 0, 0)))
     assert session.judge is None

@@ -7,9 +7,14 @@ final identification (aero_identification.pipeline). A damaged bag is read throu
 copy: every intact chunk, with a warning naming each gap (time span, messages lost per topic)
 and a file's damaged tail; a bag without the needed topics is refused, naming them. The
 anomalies recorded on ``/experiment/anomaly`` exclude what they touch, as in the node.
+
+The plan, the segment events, the anomalies and the models are aero_rig_interfaces messages,
+each read through its topic's one reader (multisine_gen.plan_format.read_plan_message and
+segment_event_from_message, rig_runtime.anomaly.Anomaly.from_message,
+aero_identification.model_message.model_from_message); these also read the std_msgs/String
+JSON of bags recorded before those messages existed, so such a bag fits as it did.
 """
 
-import json
 import math
 import shutil
 from dataclasses import dataclass, field
@@ -19,11 +24,12 @@ from typing import Any
 from aero_identification.campaign_source import campaign_dataset
 from aero_identification.hyperparameters import IdentificationConfig
 from aero_identification.identification_result import IdentificationResult
+from aero_identification.model_message import model_from_message
 from aero_identification.period_assembly import CampaignAssembler
 from aero_identification.pipeline import identify
 from aero_identification.report import write_report
 from multisine_gen.plan import ExperimentPlan, PlanError
-from multisine_gen.plan_format import read_plan_message
+from multisine_gen.plan_format import read_plan_message, segment_event_from_message
 from rig_runtime.anomaly import Anomaly
 from rig_runtime.interface import (
     EXPERIMENT_ANOMALY,
@@ -35,7 +41,7 @@ from rig_runtime.interface import (
     WING_COEFFICIENTS,
     joint_position,
 )
-from rig_runtime.messages import stamp_to_ns
+from rig_runtime.messages import stamp_to_ns, typestore
 
 REQUIRED_TOPICS = (EXPERIMENT_PLAN.name, PITCH_STATE.name, WING_COEFFICIENTS.name)
 
@@ -102,7 +108,7 @@ def _read_bag(source: Path, path: Path) -> tuple[BagData | None, Exception | Non
 
     warnings: list[str] = []
     try:
-        reader = AnyReader([source])
+        reader = AnyReader([source], default_typestore=typestore())
         reader.open()
     except Exception as exc:
         return None, exc
@@ -115,27 +121,30 @@ def _read_bag(source: Path, path: Path) -> tuple[BagData | None, Exception | Non
             )
         try:
             plan_conns = [c for c in reader.connections if c.topic == EXPERIMENT_PLAN.name]
-            messages: list[str] = []
+            messages: list[Any] = []  # ExperimentPlan, or an older bag's std_msgs/String
             for conn, _, raw in reader.messages(connections=plan_conns):
-                plan_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
-                messages.append(plan_msg.data)
+                messages.append(reader.deserialize(raw, conn.msgtype))
             # An adaptive run's decisions (multisine_gen.revision), for its report.
             segment_conns = [c for c in reader.connections if c.topic == EXPERIMENT_SEGMENT.name]
             decisions: list[dict[str, Any]] = []
             for conn, _, raw in reader.messages(connections=segment_conns) if segment_conns else ():
-                segment_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
-                event = json.loads(segment_msg.data)
+                segment_msg: Any = reader.deserialize(raw, conn.msgtype)  # a SegmentEvent
+                try:
+                    event = segment_event_from_message(segment_msg)
+                except PlanError as exc:
+                    warnings.append(f"bag {path}: {exc}")  # the error names the topic
+                    continue
                 if event.get("event") in ("decision", "refused"):
                     decisions.append(event)
             recorded_config = None
             model_conns = [c for c in reader.connections if c.topic == IDENTIFICATION_MODEL.name]
             # (no connection at all would mean every message to rosbags)
             for conn, _, raw in reader.messages(connections=model_conns) if model_conns else ():
-                model_msg: Any = reader.deserialize(raw, conn.msgtype)  # a std_msgs/String
+                model_msg: Any = reader.deserialize(raw, conn.msgtype)  # IdentificationModel
                 try:
-                    recorded_config = json.loads(model_msg.data).get("config") or recorded_config
-                except (ValueError, AttributeError):
-                    warnings.append(f"bag {path}: an /identification/model message is not JSON")
+                    recorded_config = model_from_message(model_msg).get("config") or recorded_config
+                except ValueError as exc:
+                    warnings.append(f"bag {path}: {exc}")  # the error names the topic
         except Exception as exc:  # a damaged chunk
             return None, exc
         if not messages:
@@ -164,7 +173,7 @@ def _read_bag(source: Path, path: Path) -> tuple[BagData | None, Exception | Non
             for conn, _, raw in reader.messages(connections=wanted):
                 msg: Any = reader.deserialize(raw, conn.msgtype)  # a message, typed at runtime
                 if conn.topic == EXPERIMENT_ANOMALY.name:
-                    a = Anomaly.from_json(msg.data)  # a later record of the same id replaces it
+                    a = Anomaly.from_message(msg)  # a later record of the same id replaces it
                     assembler.add_anomaly(a.id, a.first_ns, a.last_ns, a.label())
                     continue
                 stamp = stamp_to_ns(msg.header.stamp)

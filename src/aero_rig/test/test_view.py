@@ -21,6 +21,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from aero_identification import model_payload as mm
 from aero_rig import view as rig_view
 from aero_rig.view.readback import Rrd
+from multisine_gen.plan_format import segment_event_fields
 from pressure_scanner.tap_cloud import fill_cloud
 from pressure_scanner.taps import load_taps
 from pressure_scanner.wing_geometry import RigGeometry
@@ -47,6 +48,7 @@ NAN_TAP_K = 20  # this taps sample has a missing tap (a logged one: 20 % 10 == 0
 Q = RigGeometry().dynamic_pressure_pa
 CHORD = RigGeometry().chord_m
 TAPS = load_taps(None)
+STRING = "std_msgs/msg/String"  # the events' and models' type in bags recorded before
 
 
 def stamp(k: int) -> int:
@@ -120,8 +122,32 @@ def status_msg(k: int, message: str) -> Any:
     return msg
 
 
-def messages() -> list[tuple[int, str, Any]]:
-    """(receive time ns, topic, message) of a 1 s run with events, two models and status."""
+def segment_msg(event: dict[str, Any], t_ns: int, legacy: bool = False) -> Any:
+    """The /experiment/segment message of an event payload: a SegmentEvent stamped ``t_ns``,
+    or (``legacy``) the std_msgs/String JSON of a bag recorded before SegmentEvent existed."""
+    if legacy:
+        return new_message(STRING, data=json.dumps(event))
+    msg = new_message(EXPERIMENT_SEGMENT.type, **segment_event_fields(event))
+    set_stamp(msg.header.stamp, t_ns)
+    return msg
+
+
+def model_msg(text: str, legacy: bool = False) -> Any:
+    """The /identification/model message of a model record's JSON: an IdentificationModel with
+    it in ``model_json`` (its refit beside it when there is one), or (``legacy``) a String."""
+    if legacy:
+        return new_message(STRING, data=text)
+    try:
+        refit = json.loads(text).get("refit", 0)
+    except (ValueError, AttributeError):
+        refit = 0  # a broken record: only its JSON matters to the view
+    return new_message(IDENTIFICATION_MODEL.type, refit=int(refit), model_json=text)
+
+
+def messages(legacy: bool = False) -> list[tuple[int, str, Any]]:
+    """(receive time ns, topic, message) of a 1 s run with events, two models and status;
+    ``legacy``: events and models as the std_msgs/String JSON of a bag recorded before the rig
+    had its own messages."""
     out: list[tuple[int, str, Any]] = []
     xyz = TAPS.xyz_m(CHORD, 0.54)
     for k in range(N):
@@ -141,7 +167,6 @@ def messages() -> list[tuple[int, str, Any]]:
         coeff.vector.x = math.nan if k == NAN_CL_K else 0.104 * alpha_deg(k)
         set_stamp(coeff.header.stamp, t)
         out.append((t + 2, WING_COEFFICIENTS.name, coeff))
-    string = "std_msgs/msg/String"
     for k, event in (
         (0, {"event": "start", "kind": "multisine", "level": 0, "realization": 1, "period": 2}),
         (N - 1, {"event": "end", "kind": "multisine", "level": 0, "realization": 1, "period": 2}),
@@ -150,21 +175,21 @@ def messages() -> list[tuple[int, str, Any]]:
         edge = {"start": "start_stamp_s", "end": "end_stamp_s"}
         if event["event"] in edge:
             event[edge[event["event"]]] = stamp(k) / 1e9
-        out.append((stamp(k), EXPERIMENT_SEGMENT.name, new_message(string, data=json.dumps(event))))
+        out.append((stamp(k), EXPERIMENT_SEGMENT.name, segment_msg(event, stamp(k), legacy)))
     first = model_json(1, ["sine level 0 1.0 Hz", "sine level 0 0.4 Hz"], 2)
     second = model_json(2, ["sine level 0 1.0 Hz"], 1)  # one prediction, one cluster fewer
-    out.append((stamp(100), IDENTIFICATION_MODEL.name, new_message(string, data=first)))
-    out.append((stamp(199), IDENTIFICATION_MODEL.name, new_message(string, data=second)))
+    out.append((stamp(100), IDENTIFICATION_MODEL.name, model_msg(first, legacy)))
+    out.append((stamp(199), IDENTIFICATION_MODEL.name, model_msg(second, legacy)))
     for k, text in ((50, "buffering"), (60, "buffering"), (70, "refit 1 done")):
         out.append((stamp(k), IDENTIFICATION_STATUS.name, status_msg(k, text)))
     out.sort(key=lambda item: item[0])
     return out
 
 
-def write_bag(path: Path, storage: StoragePlugin) -> None:
+def write_bag(path: Path, storage: StoragePlugin, legacy: bool = False) -> None:
     with Writer(path, version=9, storage_plugin=storage) as writer:
         connections: dict[str, Any] = {}
-        for t, topic, msg in messages():
+        for t, topic, msg in messages(legacy):
             if topic not in connections:
                 connections[topic] = writer.add_connection(
                     topic, msg.__msgtype__, typestore=typestore()
@@ -204,11 +229,17 @@ EXPECTED_ENTITIES = {
 
 
 @pytest.mark.parametrize(
-    "storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3], ids=["mcap", "sqlite3"]
+    ("storage", "legacy"),
+    [(StoragePlugin.MCAP, False), (StoragePlugin.SQLITE3, False), (StoragePlugin.MCAP, True)],
+    ids=["mcap", "sqlite3", "mcap-string"],
 )
-def test_view_bag_writes_every_view_of_the_run(tmp_path: Path, storage: StoragePlugin) -> None:
+def test_view_bag_writes_every_view_of_the_run(
+    tmp_path: Path, storage: StoragePlugin, legacy: bool
+) -> None:
+    """Every view of a bag of the rig's messages; ``legacy``: of a bag recorded before them,
+    its segment events and models std_msgs/String JSON, drawn the same."""
     bag = tmp_path / "run"
-    write_bag(bag, storage)
+    write_bag(bag, storage, legacy)
     out = rig_view.view_bag(bag)
     assert out == tmp_path / "run.rrd" and out.stat().st_size > 0
     rrd = Rrd(out)
@@ -335,9 +366,8 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
     rec, where = rig_view.open_recording("test_view", "save", tmp_path / "early.rrd")
     assert "early.rrd" in where
     logger = rig_view.RigViewLogger(rec)
-    string = "std_msgs/msg/String"
-    logger.on_model(new_message(string, data=json.dumps({"refit": 0})))
-    logger.on_model(new_message(string, data=json.dumps({"refit": 1, "levels": {"1": {}}})))
+    logger.on_model(model_msg(json.dumps({"refit": 0})))
+    logger.on_model(model_msg(json.dumps({"refit": 1, "levels": {"1": {}}})))
     # A model the view cannot wholly read: what is whole is drawn, the rest named once.
     broken = json.loads(model_json(2, ["sine level 0 1.0 Hz"], 2))
     del broken["stamp_ns"]  # at the time of the models before it
@@ -345,13 +375,16 @@ def test_logger_tolerates_early_models_and_rejects_garbage(tmp_path: Path) -> No
     broken["predictions"][0][mm.series_key(mm.PNLSS_ALL)] = [0.5, 0.6]  # 2 values for 4 angles
     broken["levels"]["3"] = {"offset_deg": "high", "bla": [1, 2], "clusters": "k = 2"}
     broken["data_quality"] = {"samples": ["pitch"]}
-    for _ in range(2):
-        logger.on_model(new_message(string, data=json.dumps(broken)))
+    for legacy in (False, True):  # the same record as an older bag's String: named once
+        logger.on_model(model_msg(json.dumps(broken), legacy))
     for bad in ("not json", "[1, 2]"):
-        with pytest.raises(ValueError, match="identification/model"):
-            logger.on_model(new_message(string, data=bad))
-    with pytest.raises(ValueError, match="segment"):
-        logger.on_segment(new_message(string, data="{"))
+        for legacy in (False, True):
+            with pytest.raises(ValueError, match="identification/model"):
+                logger.on_model(model_msg(bad, legacy))
+    with pytest.raises(ValueError, match="/experiment/segment: unknown event 'bogus'"):
+        logger.on_segment(new_message(EXPERIMENT_SEGMENT.type, event="bogus"))
+    with pytest.raises(ValueError, match="/experiment/segment is not valid JSON"):
+        logger.on_segment(new_message(STRING, data="{"))
     rig_view.close_recording(rec)
     rrd = Rrd(tmp_path / "early.rrd")
     summaries = [t[0] for t in rrd.column("/model/summary", "TextDocument:text")]
@@ -475,8 +508,8 @@ def test_view_node_records_what_it_receives_over_dds(
         PITCH_STATE.name: ("sensor_msgs/msg/JointState", "stream"),
         PRESSURE_TAPS.name: ("sensor_msgs/msg/PointCloud2", "stream"),
         WING_COEFFICIENTS.name: ("geometry_msgs/msg/Vector3Stamped", "stream"),
-        EXPERIMENT_SEGMENT.name: ("std_msgs/msg/String", "events"),
-        IDENTIFICATION_MODEL.name: ("std_msgs/msg/String", "latched"),
+        EXPERIMENT_SEGMENT.name: (EXPERIMENT_SEGMENT.type, "events"),
+        IDENTIFICATION_MODEL.name: (IDENTIFICATION_MODEL.type, "latched"),
         IDENTIFICATION_STATUS.name: ("diagnostic_msgs/msg/DiagnosticArray", "latched"),
     }
     node = Node("test_view_publisher", argv=[])

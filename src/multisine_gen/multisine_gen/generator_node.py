@@ -1,8 +1,10 @@
 """Generator node: streams the experiment plan as pitch commands (docs/design.md §4-§5).
 
 Publishes ``/pitch/command`` (sensor_msgs/JointState, joint ``pitch``, position in rad) sample by
-sample with stamps t0 + k/fs, the whole plan as JSON on ``/experiment/plan`` (latched) and a JSON
-event per segment start/end on ``/experiment/segment``. Pacing: the wall clock times
+sample with stamps t0 + k/fs, the plan on ``/experiment/plan`` (aero_rig_interfaces/ExperimentPlan,
+latched; the whole plan as JSON in ``plan_json``, stamped t0) and an event per segment start/end on
+``/experiment/segment`` (aero_rig_interfaces/SegmentEvent, stamped with the segment's first or
+last sample; multisine_gen.plan_format). Pacing: the wall clock times
 ``real_time_factor`` (1 on the rig; 0 = as fast as the graph takes). With ``flow_control`` the
 generator never runs more than ``max_lead_samples`` ahead of the last ``/wing/coefficients``
 stamp the lift reports on ``/wing/coefficients/progress``, a credit that makes a simulated run
@@ -15,18 +17,21 @@ is matched on both sides, so the first sample reaches every node and the recorde
 is not ready after ``start_timeout_s`` stops the generator with an error naming it and what it
 still waits for; nothing has moved then.
 
-Adaptive runs (docs/design.md §7.9): the generator takes the identifier's requests on
-``/experiment/control`` (multisine_gen.revision: end the realization, finish the level, add a
-realization, go on) within ``adaptive_min_periods``, ``adaptive_min_realizations`` and
-``adaptive_max_realizations``. A request it carries out becomes the plan's next revision, which
-it publishes on ``/experiment/plan`` (latched; every sample already sent unchanged) with a
-``decision`` event on ``/experiment/segment`` naming the request, its reason and the change; a
-request it cannot carry out is refused, logged and recorded as a ``refused`` event, and changes
-nothing. With ``flow_control`` (simulation) and a controller matched on ``/experiment/control``,
-the stream holds at the end of each measured multisine period until the identifier's request
-on that period has come, so a simulated adaptive run is deterministic; the hold ends without it
-when the controller is gone, or after the DDS participant lease, logged. On the rig the stream
-never holds: a request takes effect at the next period boundary after it arrives.
+Adaptive runs (``adaptive``; docs/design.md §7.9): the generator serves the identifier's
+requests on the ``/experiment/control`` service (aero_rig_interfaces/srv/ControlExperiment;
+multisine_gen.revision: end the realization, finish the level, add a realization, go on) within
+``adaptive_min_periods``, ``adaptive_min_realizations`` and ``adaptive_max_realizations``. A
+request it carries out becomes the plan's next revision, which it publishes on
+``/experiment/plan`` (latched; every sample already sent unchanged) with a ``decision`` event on
+``/experiment/segment`` naming the request, its reason and the change, and answers accepted with
+the change; a request it cannot carry out is refused, logged, recorded as a ``refused`` event
+and answered with the reason, and changes nothing. The service exists in every run, so a caller
+always gets an answer: outside an adaptive run every request is refused (:data:`NOT_ADAPTIVE`),
+logged and not recorded. With ``flow_control`` (simulation) and a client of the service in the
+graph, the stream holds at the end of each measured multisine period until the identifier's
+request on that period has come, so a simulated adaptive run is deterministic; the hold ends
+without it when the client is gone, or after the DDS participant lease, logged. On the rig the
+stream never holds: a request takes effect at the next period boundary after it arrives.
 
 Every second it publishes its progress on ``/diagnostics`` (name ``<node>: stream``): its state
 (``barrier``, ``streaming``, ``holding``, ``waiting for credit``, ``finished``), the samples
@@ -38,16 +43,19 @@ stopped; stopped early, it publishes ``plan_aborted`` and the actuator's watchdo
 ramps to the safe angle.
 """
 
-import json
 import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray
-from std_msgs.msg import Header, String
+from std_msgs.msg import Header
 
+from aero_rig_interfaces.msg import ExperimentPlan as ExperimentPlanMsg
+from aero_rig_interfaces.msg import ReadinessReport as ReadinessReportMsg
+from aero_rig_interfaces.msg import SegmentEvent
+from aero_rig_interfaces.srv import ControlExperiment
 from rig_runtime import Node, Parameter, new_message, run_node, set_stamp, stamp_to_ns
 from rig_runtime.barrier import ReadinessReport, StartBarrier
 from rig_runtime.diagnostics import OK, WARN, diagnostic_array
@@ -69,8 +77,14 @@ from rig_runtime.ros_environment import PARTICIPANT_LEASE_S
 from .campaigns import default_plan, short_plan
 from .pacing import StreamPacer
 from .plan import ExperimentPlan
-from .plan_format import plan_from_json, plan_message, segment_event
-from .revision import Adaptation, RefusedRequestError, RequestError, request_from_json, revise
+from .plan_format import plan_from_json, plan_message, segment_event, segment_event_fields
+from .revision import (
+    Adaptation,
+    RefusedRequestError,
+    RequestError,
+    request_from_fields,
+    revise,
+)
 
 _LIMITS = ActuatorLimits()  # the defaults of the limit parameters
 
@@ -108,6 +122,12 @@ PARAMETERS = [
         _LIMITS.max_rate_deg_s,
         "actuator rate limit the plan is checked against",
         min=0.1,
+    ),
+    Parameter(
+        "adaptive",
+        False,
+        "serve the identifier's requests on /experiment/control (aero-rig campaign --adaptive, "
+        "with the identifier's adaptive); false: refuse every request, play the plan as designed",
     ),
     # Bounds on the identifier's requests in adaptive runs (multisine_gen.revision).
     Parameter(
@@ -164,6 +184,21 @@ def check_parameters(
 
 DIAGNOSTICS_PERIOD_S = 1.0  # the progress heartbeat on /diagnostics
 
+# The answer to every request outside an adaptive run.
+NOT_ADAPTIVE = (
+    "not an adaptive run: the generator plays its plan as designed (start it with "
+    "adaptive:=true / aero-rig campaign --adaptive)"
+)
+
+
+class ControlAnswer(NamedTuple):
+    """The generator's answer to one request (the ControlExperiment response's fields)."""
+
+    accepted: bool  # false: refused, the plan is unchanged
+    message: str  # refused: why; accepted: the change made (empty: none)
+    revision: int  # the plan's revision after the request
+    from_k: int = -1  # the first revised sample (-1: nothing revised)
+
 
 class GeneratorNode(Node):
     NODE_NAME = "generator"
@@ -174,6 +209,8 @@ class GeneratorNode(Node):
         p = self.parameter_values()
         # Refuse before publishing anything if the plan would leave the actuator's limits.
         self.limits, self.adaptation, plan = check_parameters(p)
+        self.adaptive = bool(p["adaptive"])
+        self.plan_id = str(p["plan"])
         self.fs = plan.fs
         self._use(plan)
         self.planned_samples = self.total
@@ -187,10 +224,10 @@ class GeneratorNode(Node):
             PITCH_COMMAND.type, PITCH_COMMAND.name, topic_qos(PITCH_COMMAND)
         )
         self.plan_pub = self.create_publisher(
-            String, EXPERIMENT_PLAN.name, topic_qos(EXPERIMENT_PLAN)
+            ExperimentPlanMsg, EXPERIMENT_PLAN.name, topic_qos(EXPERIMENT_PLAN)
         )
         self.seg_pub = self.create_publisher(
-            String, EXPERIMENT_SEGMENT.name, topic_qos(EXPERIMENT_SEGMENT)
+            SegmentEvent, EXPERIMENT_SEGMENT.name, topic_qos(EXPERIMENT_SEGMENT)
         )
         self.k = 0
         self.t0_ns: int | None = None
@@ -218,10 +255,12 @@ class GeneratorNode(Node):
                 required=True,
             )
         self.create_subscription(
-            String, GRAPH_READY.name, self.on_ready, topic_qos(GRAPH_READY), depth=256
+            ReadinessReportMsg, GRAPH_READY.name, self.on_ready, topic_qos(GRAPH_READY), depth=256
         )
-        self.control_sub = self.create_subscription(
-            String, EXPERIMENT_CONTROL.name, self.on_control, topic_qos(EXPERIMENT_CONTROL)
+        # In every run, so that a request always gets an answer (NOT_ADAPTIVE outside an
+        # adaptive one); rclpy's create_service (rig_runtime.Node does not wrap it).
+        self.control_srv = self.create_service(
+            ControlExperiment, EXPERIMENT_CONTROL.name, self.on_control
         )
         self.diag_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS.name, topic_qos(DIAGNOSTICS)
@@ -244,42 +283,70 @@ class GeneratorNode(Node):
 
     def _publish_plan(self) -> None:
         assert self.t0_ns is not None
-        message = plan_message(self.plan, self.t0_ns, adaptation=self.adaptation.to_dict())
-        self.plan_pub.publish(String(data=message))
+        fields = plan_message(
+            self.plan,
+            self.t0_ns,
+            adaptation=self.adaptation.to_dict() if self.adaptive else None,
+            plan_id=self.plan_id,
+        )
+        msg = ExperimentPlanMsg(**fields)
+        set_stamp(msg.header.stamp, self.t0_ns)
+        self.plan_pub.publish(msg)
 
     # -- adaptive runs ------------------------------------------------------------------------
-    def on_control(self, msg: String) -> None:
-        """One request of the identifier (multisine_gen.revision)."""
+    def on_control(
+        self, request: ControlExperiment.Request, response: ControlExperiment.Response
+    ) -> ControlExperiment.Response:
+        """The /experiment/control service: one request of the identifier, answered."""
+        answer = self.control(
+            request.action, request.level, request.after_k, request.reason, request.more
+        )
+        response.accepted = answer.accepted
+        response.message = answer.message
+        response.revision = answer.revision
+        response.from_k = answer.from_k
+        return response
+
+    def control(
+        self, action: str, level: int, after_k: int, reason: str = "", more: bool = False
+    ) -> ControlAnswer:
+        """Decide on one request (multisine_gen.revision): carry it out as the plan's next
+        revision, or refuse it; record the decision on /experiment/segment (adaptive runs)."""
+        revision_now = self.plan.revision
+        if not self.adaptive:
+            self.get_logger().warning(f"refused {action} on level {level}: {NOT_ADAPTIVE}")
+            return ControlAnswer(False, NOT_ADAPTIVE, revision_now)
         record: dict[str, Any] = {"t0_ns": self.t0_ns, "at_k": self.k}
         try:
-            request = request_from_json(msg.data)
+            request = request_from_fields(action, level, after_k, reason, more)
         except RequestError as exc:
             self.get_logger().error(
-                f"{EXPERIMENT_CONTROL.name}: bad request ignored, the plan is unchanged: {exc}"
+                f"{EXPERIMENT_CONTROL.name}: bad request refused, the plan is unchanged: {exc}"
             )
-            self._event(record | {"event": "refused", "request": msg.data, "why": str(exc)})
-            return
+            bad = {"request": str(action), "reason": str(reason)}
+            self._event(record | bad | {"event": "refused", "why": str(exc)}, self.k)
+            return ControlAnswer(False, str(exc), revision_now)
         record |= {"request": request.action, "level": request.level, "after_k": request.after_k}
         record["reason"] = request.reason
         if self.t0_ns is None or self.finished:
             why = "the plan has not started" if self.t0_ns is None else "the plan has ended"
             self.get_logger().warning(f"refused {request.action} on level {request.level}: {why}")
-            self._event(record | {"event": "refused", "why": why})
-            return
+            self._event(record | {"event": "refused", "why": why}, self.k)
+            return ControlAnswer(False, why, revision_now)
         if not request.more:
             self.judged.add(request.after_k)  # the last request on that period
         late = self.k - 1 - request.after_k  # samples published past the judged period
         if request.action == "go_on":
-            self._event(record | {"event": "decision", "change": ""})
-            return
+            self._event(record | {"event": "decision", "change": ""}, self.k)
+            return ControlAnswer(True, "", revision_now)
         try:
             revision = revise(self.plan, self.k, request, self.adaptation, self.limits)
         except (RequestError, RefusedRequestError) as exc:
             self.get_logger().warning(
                 f"refused {request.action} on level {request.level} ({request.reason}): {exc}"
             )
-            self._event(record | {"event": "refused", "why": str(exc)})
-            return
+            self._event(record | {"event": "refused", "why": str(exc)}, self.k)
+            return ControlAnswer(False, str(exc), revision_now)
         self._use(revision.plan)
         self.pacer.total = self.total
         self._publish_plan()
@@ -296,12 +363,14 @@ class GeneratorNode(Node):
                 "revision": revision.plan.revision,
                 "from_k": revision.from_k,
                 "samples": self.total,
-            }
+            },
+            record["at_k"],
         )
+        return ControlAnswer(True, revision.change, revision.plan.revision, revision.from_k)
 
     def _holds(self, k: int) -> bool:
         """Whether sample k waits for the identifier's request on the period that ends at k-1
-        (simulation with a controller matched; module docstring)."""
+        (an adaptive simulation with a client of the service; module docstring)."""
         segment = self.ends.get(k - 1)
         if (
             segment is None
@@ -311,7 +380,7 @@ class GeneratorNode(Node):
         ):
             self.hold_since = None
             return False
-        if self.control_sub.publisher_count() == 0:
+        if not self.adaptive or self.count_clients(EXPERIMENT_CONTROL.name) == 0:
             return False
         now = time.monotonic()
         if self.hold_since is None:
@@ -332,7 +401,7 @@ class GeneratorNode(Node):
             return
         self.pacer.credit(round((stamp_to_ns(msg.stamp) - self.t0_ns) * self.fs / 1e9))
 
-    def on_ready(self, msg: String) -> None:
+    def on_ready(self, msg: ReadinessReportMsg) -> None:
         try:
             self.barrier.update(ReadinessReport.from_message(msg))
         except (ValueError, KeyError) as exc:
@@ -343,8 +412,13 @@ class GeneratorNode(Node):
         assert self.t0_ns is not None
         return self.t0_ns + round(k * 1e9 / self.fs)
 
-    def _event(self, payload: dict[str, Any]) -> None:
-        self.seg_pub.publish(String(data=json.dumps(payload)))
+    def _event(self, payload: dict[str, Any], k: int) -> None:
+        """Publish one /experiment/segment event, stamped with plan sample ``k`` (none before
+        t0: a request refused before the start)."""
+        msg = SegmentEvent(**segment_event_fields(payload))
+        if self.t0_ns is not None:
+            set_stamp(msg.header.stamp, self.stamp_ns(k))
+        self.seg_pub.publish(msg)
 
     def pending(self) -> list[str]:
         """What the start still waits for (empty: every member ready and matched)."""
@@ -399,7 +473,8 @@ class GeneratorNode(Node):
                 break
             segment = self.starts.get(k)
             if segment is not None:
-                self._event(segment_event(segment, "start", t0_s, self.fs) | {"t0_ns": self.t0_ns})
+                event = segment_event(segment, "start", t0_s, self.fs) | {"t0_ns": self.t0_ns}
+                self._event(event, segment.start_k)
             msg = new_message(
                 PITCH_COMMAND.type,
                 name=[PITCH_JOINT],
@@ -409,7 +484,8 @@ class GeneratorNode(Node):
             self.cmd_pub.publish(msg)
             segment = self.ends.get(k)
             if segment is not None:
-                self._event(segment_event(segment, "end", t0_s, self.fs) | {"t0_ns": self.t0_ns})
+                event = segment_event(segment, "end", t0_s, self.fs) | {"t0_ns": self.t0_ns}
+                self._event(event, segment.stop_k - 1)
             self.k += 1
         if self.k >= self.total:
             self.finished = True
@@ -421,7 +497,8 @@ class GeneratorNode(Node):
                     "planned_samples": self.planned_samples,
                     "revision": self.plan.revision,
                     "t0_ns": self.t0_ns,
-                }
+                },
+                self.total - 1,  # the last sample published
             )
             self.get_logger().info(
                 f"plan finished: {self.total} samples published ({self.planned_samples} "
@@ -460,7 +537,8 @@ class GeneratorNode(Node):
     def abort_report(self) -> None:
         """At shutdown: a plan stopped before its end is reported as aborted."""
         if self.t0_ns is not None and not self.finished:
-            self._event({"event": "plan_aborted", "samples": self.k, "t0_ns": self.t0_ns})
+            event = {"event": "plan_aborted", "samples": self.k, "t0_ns": self.t0_ns}
+            self._event(event, max(self.k - 1, 0))  # the last sample published
             self.get_logger().warning(
                 f"stopped at sample {self.k} of {self.total}; the actuator holds, then ramps to "
                 "its safe angle"

@@ -197,7 +197,11 @@ def plan_message(
     payload["t0_ns"] = int(t0_ns)
     if adaptation is not None:
         payload["adaptation"] = dict(adaptation)
-    offsets = {s.level: s.offset_deg for s in plan.segments if s.kind == "multisine"}
+    offsets = {
+        s.level: s.offset_deg
+        for s in plan.segments
+        if s.kind == "multisine" and s.offset_deg is not None
+    }
     return {
         "plan_id": plan_id,
         "revision": int(plan.revision),

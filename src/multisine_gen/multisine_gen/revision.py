@@ -1,8 +1,9 @@
 """Plan revisions of an adaptive run: the identifier's requests, applied at a period boundary.
 
 The identifier judges each measured multisine period as it completes and sends the generator
-one request on ``/experiment/control`` (rig_runtime.interface.EXPERIMENT_CONTROL; the rules are
-aero_identification.adaptive, docs/design.md §7.9):
+one request through the ``/experiment/control`` service (rig_runtime.interface.EXPERIMENT_CONTROL,
+aero_rig_interfaces/srv/ControlExperiment; the rules are aero_identification.adaptive,
+docs/design.md §7.9):
 
 - ``go_on``: play the plan as it stands;
 - ``end_realization``: the realization now streaming ends after the period now streaming
@@ -20,13 +21,15 @@ generator publishes next, which inside a multisine block is a period boundary, a
 period of a realization that has not started stays. Every sample before that boundary is
 identical (checked), the revised plan is checked against the actuator's limits as the original
 was, and a request that cannot be carried out is refused (:class:`RefusedRequestError`) with its
-reason, changing nothing. This module is pure: no ROS, no DDS.
+reason, changing nothing. :func:`request_from_fields` checks a request's fields (the service
+request's); :func:`request_from_json` reads the JSON that bags recorded before the service carried
+a request on a std_msgs/String topic. This module is pure: no ROS, no DDS.
 """
 
 import dataclasses
 import json
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -44,6 +47,7 @@ __all__ = [
     "RefusedRequestError",
     "RequestError",
     "Revision",
+    "request_from_fields",
     "request_from_json",
     "revise",
 ]
@@ -53,8 +57,8 @@ ACTIONS: tuple[str, ...] = ("go_on", "end_realization", "finish_level", "add_rea
 
 
 class RequestError(ValueError):
-    """A control message that is not a request (malformed JSON, unknown action or level, a
-    negative count): logged, and nothing changes."""
+    """A control request that is not one (an unknown action or level, a negative sample or
+    level, malformed JSON in a recorded one): refused, and nothing changes."""
 
 
 class RefusedRequestError(PlanError):
@@ -90,7 +94,7 @@ class Adaptation:
 
 @dataclass(frozen=True)
 class PlanRequest:
-    """One request on /experiment/control.
+    """One request to the /experiment/control service (ControlExperiment's request fields).
 
     action: one of ACTIONS; level: the plan level it concerns; after_k: the last plan sample
     of the period it judged (the generator may hold its stream there until the request
@@ -105,12 +109,37 @@ class PlanRequest:
     reason: str = ""
     more: bool = False
 
+    def to_fields(self) -> dict[str, Any]:
+        """The ControlExperiment request's fields."""
+        return dataclasses.asdict(self)
+
     def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self))
+        """The request as the std_msgs/String topic carried it before the service."""
+        return json.dumps(self.to_fields())
+
+
+def request_from_fields(
+    action: Any, level: Any, after_k: Any, reason: Any = "", more: Any = False
+) -> PlanRequest:
+    """The request of a ControlExperiment request's fields; RequestError saying what is wrong
+    (an unknown action, a level or sample that is not an integer >= 0)."""
+    if action not in ACTIONS:
+        raise RequestError(f"action {action!r} is not one of {list(ACTIONS)}")
+    for name, value in (("level", level), ("after_k", after_k)):
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise RequestError(f"{name} must be an integer, got {value!r}")
+        if value < 0:
+            raise RequestError(f"{name} must be >= 0, got {value}")
+    if not isinstance(reason, str):
+        raise RequestError(f"reason must be a string, got {reason!r}")
+    if not isinstance(more, bool):
+        raise RequestError(f"more must be true or false, got {more!r}")
+    return PlanRequest(action, int(level), int(after_k), reason, more)
 
 
 def request_from_json(text: str) -> PlanRequest:
-    """The request of a /experiment/control message; RequestError saying what is wrong."""
+    """The request of a recorded std_msgs/String /experiment/control message (bags from before
+    the service); RequestError saying what is wrong."""
     try:
         data = json.loads(text)
     except json.JSONDecodeError as error:
@@ -120,22 +149,13 @@ def request_from_json(text: str) -> PlanRequest:
     unknown = sorted(set(data) - {f.name for f in dataclasses.fields(PlanRequest)})
     if unknown:
         raise RequestError(f"unknown field(s) {unknown}")
-    action = data.get("action")
-    if action not in ACTIONS:
-        raise RequestError(f"action {action!r} is not one of {list(ACTIONS)}")
-    for name in ("level", "after_k"):
-        value = data.get(name)
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise RequestError(f"{name} must be an integer, got {value!r}")
-        if value < 0:
-            raise RequestError(f"{name} must be >= 0, got {value}")
-    reason = data.get("reason", "")
-    if not isinstance(reason, str):
-        raise RequestError(f"reason must be a string, got {reason!r}")
-    more = data.get("more", False)
-    if not isinstance(more, bool):
-        raise RequestError(f"more must be true or false, got {more!r}")
-    return PlanRequest(action, int(data["level"]), int(data["after_k"]), reason, more)
+    return request_from_fields(
+        data.get("action"),
+        data.get("level"),
+        data.get("after_k"),
+        data.get("reason", ""),
+        data.get("more", False),
+    )
 
 
 @dataclass(frozen=True)

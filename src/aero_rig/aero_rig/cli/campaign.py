@@ -93,7 +93,8 @@ def add_parser(subparsers: Any) -> None:
         "--adaptive",
         action="store_true",
         help="let the identifier end realizations and levels that converged and add "
-        "realizations where they did not (identifier parameter adaptive; docs/design.md §7.9)",
+        "realizations where they did not (identifier and generator parameter adaptive; "
+        "docs/design.md §7.9)",
     )
     p.add_argument(
         "--allow-excluded",
@@ -225,6 +226,8 @@ def campaign_overrides(args: argparse.Namespace, run_dir: Path) -> dict[str, dic
             "plan": plan,
             "seed": args.seed,
             "real_time_factor": args.real_time_factor,
+            # It serves the identifier's requests only in an adaptive run (generator_node.py).
+            **({"adaptive": True} if args.adaptive else {}),
         },
         "recorder": {"output": str(run_dir / "bag")},
         "identifier": {

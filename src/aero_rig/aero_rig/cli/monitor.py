@@ -1,13 +1,12 @@
 """The campaign's in-process observer: the plan, the progress, the identifier's state and the
 flow of the streams (rig_runtime.flow)."""
 
-import json
 import time
 from collections.abc import Collection, Mapping
 from typing import Any
 
 from multisine_gen.plan import PlanError
-from multisine_gen.plan_format import read_plan_message
+from multisine_gen.plan_format import read_plan_message, segment_event_from_message
 from rig_runtime.flow import FlowWatch, flow_reports
 from rig_runtime.interface import (
     DIAGNOSTICS,
@@ -82,7 +81,7 @@ class CampaignMonitor:
 
     def _plan(self, msg: Any) -> None:
         try:
-            plan, t0_ns = read_plan_message(msg.data)
+            plan, t0_ns = read_plan_message(msg)
         except PlanError:
             return  # the identifier refuses it, naming why, and the graph stops
         if plan.revision < self.revision:
@@ -95,7 +94,10 @@ class CampaignMonitor:
         self.liveness.plan_seen(time.monotonic())
 
     def _segment(self, msg: Any) -> None:
-        event = json.loads(msg.data)
+        try:
+            event = segment_event_from_message(msg)
+        except PlanError:
+            return  # not an event of this plan format: no progress to read from it
         if event.get("event") == "end":
             self.k = int(event["start_k"]) + int(event["length"])
         elif event.get("event") in ("plan_end", "plan_aborted"):

@@ -1,4 +1,10 @@
-"""``RigViewLogger``: rig messages (plain objects, no middleware) into Rerun logs."""
+"""``RigViewLogger``: rig messages (plain objects, no middleware) into Rerun logs.
+
+The event and model topics are aero_rig_interfaces messages; a bag recorded before them
+carries the same payloads as std_msgs/String JSON, and each is read through its topic's one
+reader (multisine_gen.plan_format.segment_event_from_message,
+aero_identification.model_message.model_from_message), which takes both.
+"""
 
 import json
 import math
@@ -13,12 +19,13 @@ import numpy as np
 import rerun as rr
 
 from aero_identification import model_payload as mm
+from aero_identification.model_message import model_from_message
 from aero_identification.quality import data_quality_lines
+from multisine_gen.plan_format import segment_event_from_message
 from pressure_scanner.tap_cloud import read_cloud
 from pressure_scanner.wing_geometry import RigGeometry
 from rig_runtime import stamp_to_ns
 from rig_runtime.interface import (
-    EXPERIMENT_SEGMENT,
     IDENTIFICATION_MODEL,
     PITCH_JOINT,
     PRESSURE_TAPS,
@@ -63,17 +70,6 @@ def _db(values: np.ndarray, power: bool) -> np.ndarray:
         out = (10.0 if power else 20.0) * np.log10(values)
     out[~np.isfinite(out)] = np.nan
     return out
-
-
-def json_object(text: str, topic: str) -> dict[str, Any]:
-    """The JSON object a std_msgs/String of ``topic`` carries; ValueError naming the topic."""
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{topic}: not JSON ({exc})") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"{topic}: expected a JSON object")
-    return value
 
 
 def finite_runs(x: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
@@ -351,8 +347,10 @@ class RigViewLogger:
     # -- events --------------------------------------------------------------------------------
 
     def on_segment(self, msg: Any) -> None:
+        """A SegmentEvent (or the std_msgs/String JSON of an older bag): a text log line; the
+        plan_end event gives the plan's first stamp, samples and rate for :meth:`report`."""
         self.counts["segment"] += 1
-        event = json_object(msg.data, EXPERIMENT_SEGMENT.name)
+        event = segment_event_from_message(msg)  # PlanError (a ValueError) naming the topic
         edge = event.get("event", "?")
         stamp_key = {"start": "start_stamp_s", "end": "end_stamp_s"}.get(edge)
         t_ns = None
@@ -394,7 +392,7 @@ class RigViewLogger:
         line. What cannot be drawn is named once on ``/events/view`` (`model_payload.problems`)
         and left out; the rest is drawn."""
         self.counts["model"] += 1
-        model = json_object(msg.data, IDENTIFICATION_MODEL.name)
+        model = model_from_message(msg)  # ValueError naming the topic
         stamp = model.get(mm.STAMP_NS)
         self._set_time(int(stamp) if isinstance(stamp, int | float) else None)
         topic = IDENTIFICATION_MODEL.name

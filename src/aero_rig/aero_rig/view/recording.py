@@ -87,6 +87,19 @@ TOPICS: dict[str, tuple[str, str]] = {
 }
 
 
+# Topics that bags recorded before the rig had its own messages (aero_rig_interfaces) carry
+# as std_msgs/String JSON: the handlers read both (RigViewLogger.on_segment, on_model).
+LEGACY_TYPES: dict[str, str] = {
+    EXPERIMENT_SEGMENT.name: "std_msgs/msg/String",
+    IDENTIFICATION_MODEL.name: "std_msgs/msg/String",
+}
+
+
+def _readable(topic: str, msgtype: str) -> bool:
+    """Whether the handler of ``topic`` (a TOPICS key) reads a bag's ``msgtype``."""
+    return msgtype in (TOPICS[topic][0], LEGACY_TYPES.get(topic))
+
+
 def takes_cdr(handler: str) -> bool:
     """Whether a ``TOPICS`` handler takes the serialized message (CDR bytes): the live node
     subscribes its topic raw, the bag replay passes the bag's bytes."""
@@ -113,7 +126,8 @@ def view_bag(
 
     Writes ``rrd_path`` (default: ``<bag>.rrd`` beside the bag unless ``spawn``), and/or streams
     to a spawned viewer. Returns the .rrd path (None when only spawning). Messages go in bag
-    order; an unreadable message is skipped and reported on ``/events/view``.
+    order; an unreadable message is skipped and reported on ``/events/view``. A bag recorded
+    before the rig's own messages (segment events and models as std_msgs/String) is drawn too.
     """
     from rosbags.highlevel import AnyReader
 
@@ -133,7 +147,7 @@ def view_bag(
             conns = []
             for conn in reader.connections:
                 topic = _route(conn.topic)
-                if topic is not None and conn.msgtype == TOPICS[topic][0]:
+                if topic is not None and _readable(topic, conn.msgtype):
                     conns.append((conn, getattr(view, TOPICS[topic][1])))
             handlers = {c.id: h for c, h in conns}
             serialized = {c.id for c, h in conns if takes_cdr(h.__name__)}
