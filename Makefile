@@ -9,8 +9,9 @@ export ROS_WHEELS_EXIST := import platform, sys; sys.exit(0 if platform.system()
 export PLATFORM := import platform, sys; print(platform.machine(), "Python", platform.python_version())
 STAMP  := $(VENV)/.installed
 INTERFACES := $(VENV)/.interfaces
-IFACE_FILES := $(wildcard src/aero_rig_interfaces/msg/*.msg src/aero_rig_interfaces/srv/*.srv) \
-  src/aero_rig_interfaces/CMakeLists.txt src/aero_rig_interfaces/package.xml
+IFACE_DIR := src/aero_rig_interfaces
+IFACE_FILES := $(wildcard $(IFACE_DIR)/msg/*.msg $(IFACE_DIR)/srv/*.srv) $(IFACE_DIR)/CMakeLists.txt \
+  $(IFACE_DIR)/package.xml $(IFACE_DIR)/build_in_venv.sh $(IFACE_DIR)/cmake/wheel_include_dirs.cmake
 PACKAGES := rig_runtime rig_testing multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
 PKG_FILES := $(foreach p,$(PACKAGES),src/$(p)/setup.py src/$(p)/package.xml)
 
@@ -50,7 +51,7 @@ $(STAMP): $(BIN)/python $(PKG_FILES) requirements-dev.txt requirements-ros.txt c
 # On a ROS machine, colcon builds the package like any interface package.
 $(INTERFACES): $(STAMP) $(IFACE_FILES)
 	@if $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
-	  PIP_CONSTRAINT=$(CURDIR)/constraints.txt src/aero_rig_interfaces/build_in_venv.sh $(VENV) || exit 1; \
+	  PIP_CONSTRAINT=$(CURDIR)/constraints.txt $(IFACE_DIR)/build_in_venv.sh $(VENV) || exit 1; \
 	else echo "aero_rig_interfaces: no rclpy, not built (the offline verbs read the .msg files)"; fi
 	@touch $(INTERFACES)
 
@@ -61,7 +62,9 @@ ROS2_TOOLS := $(VENV)/.ros2-tools
 $(ROS2_TOOLS): $(INTERFACES)
 	@if [ -d "$(ROS2_PYTHON)" ] && $(BIN)/python -c 'import rclpy' 2>/dev/null; then \
 	  $(ROS2_PYTHON)/install.sh $(VENV) && \
-	  ($(ROS2_PYTHON)/build_composition_interfaces.sh $(VENV) || \
+	  ($(BIN)/python -c "import composition_interfaces.srv" 2>/dev/null || \
+	   PIP_CONSTRAINT=$(CURDIR)/constraints.txt $(IFACE_DIR)/build_in_venv.sh $(VENV) \
+	     $(ROS2_PYTHON)/composition_interfaces || \
 	   echo "ros2 launch: composition_interfaces did not build; the launch tests will skip"); \
 	else echo "ros2 tools: $(ROS2_PYTHON) or rclpy missing; the ros2 CLI tests will skip"; fi
 	@touch $(ROS2_TOOLS)
@@ -83,13 +86,13 @@ test: lint typecheck $(ROS2_TOOLS)
 	$(BIN)/pytest --durations=25
 
 # Unit tests only (no node graph, no campaign, no build): under a minute.
-test-fast: $(STAMP)
+test-fast: $(INTERFACES)
 	$(BIN)/pytest -m "not slow"
 
 campaign: $(INTERFACES)
 	$(BIN)/aero-rig campaign --plan default $(CAMPAIGN_ARGS)
 
-bench: $(STAMP)
+bench: $(INTERFACES)
 	@for b in bench/*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 clean:

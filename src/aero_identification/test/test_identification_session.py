@@ -514,10 +514,10 @@ def test_a_request_that_cannot_be_sent_leaves_the_later_periods_waiting() -> Non
 
     def fails_once(request: PlanRequest) -> None:
         outputs.send_request = sent  # type: ignore[method-assign]
-        raise RuntimeError("publisher gone")
+        raise RuntimeError("service client gone")
 
     outputs.send_request = fails_once  # type: ignore[method-assign]
-    with pytest.raises(RuntimeError, match="publisher gone"):
+    with pytest.raises(RuntimeError, match="service client gone"):
         session.on_timer()
     assert session.judge is not None
     assert [p.period for p in session.judge.to_judge] == [1]  # not lost with the first

@@ -430,6 +430,13 @@ class GeneratorNode(Node):
                 f"{self.fq_name}: {subscribers} of {wanted} subscribers "
                 "on /pitch/command (is the actuator node running?)"
             )
+        if self.adaptive and self.count_clients(EXPERIMENT_CONTROL.name) == 0:
+            # The identifier's requests decide the plan from the first period on: its client
+            # must be in this node's graph before t0, or the first hold would not wait for it.
+            waiting.append(
+                f"{self.fq_name}: no client of {EXPERIMENT_CONTROL.name} yet (adaptive run: "
+                "is the identifier running with adaptive true?)"
+            )
         return waiting
 
     def _start(self) -> bool:

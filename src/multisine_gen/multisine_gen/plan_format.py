@@ -197,20 +197,15 @@ def plan_message(
     payload["t0_ns"] = int(t0_ns)
     if adaptation is not None:
         payload["adaptation"] = dict(adaptation)
-    offsets = {
-        s.level: s.offset_deg
-        for s in plan.segments
-        if s.kind == "multisine" and s.offset_deg is not None
-    }
     return {
         "plan_id": plan_id,
         "revision": int(plan.revision),
         "t0_ns": int(t0_ns),
         "fs": float(plan.fs),
-        "samples": int(plan.segments[-1].stop_k) if plan.segments else 0,
+        "samples": int(plan.total_samples),
         "levels": len(plan.levels),
         "realizations": [len(lv.realizations) for lv in plan.levels],
-        "offsets_deg": [float(offsets.get(lv.level, math.nan)) for lv in plan.levels],
+        "offsets_deg": [float(lv.offset_deg) for lv in plan.levels],
         "adaptive": adaptation is not None,
         "plan_json": json.dumps(payload, allow_nan=False),
     }

@@ -21,13 +21,11 @@ generator publishes next, which inside a multisine block is a period boundary, a
 period of a realization that has not started stays. Every sample before that boundary is
 identical (checked), the revised plan is checked against the actuator's limits as the original
 was, and a request that cannot be carried out is refused (:class:`RefusedRequestError`) with its
-reason, changing nothing. :func:`request_from_fields` checks a request's fields (the service
-request's); :func:`request_from_json` reads the JSON that bags recorded before the service carried
-a request on a std_msgs/String topic. This module is pure: no ROS, no DDS.
+reason, changing nothing. :func:`request_from_fields` checks a request's fields (the
+ControlExperiment service request's). This module is pure: no ROS, no DDS.
 """
 
 import dataclasses
-import json
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -48,7 +46,6 @@ __all__ = [
     "RequestError",
     "Revision",
     "request_from_fields",
-    "request_from_json",
     "revise",
 ]
 
@@ -113,10 +110,6 @@ class PlanRequest:
         """The ControlExperiment request's fields."""
         return dataclasses.asdict(self)
 
-    def to_json(self) -> str:
-        """The request as the std_msgs/String topic carried it before the service."""
-        return json.dumps(self.to_fields())
-
 
 def request_from_fields(
     action: Any, level: Any, after_k: Any, reason: Any = "", more: Any = False
@@ -135,27 +128,6 @@ def request_from_fields(
     if not isinstance(more, bool):
         raise RequestError(f"more must be true or false, got {more!r}")
     return PlanRequest(action, int(level), int(after_k), reason, more)
-
-
-def request_from_json(text: str) -> PlanRequest:
-    """The request of a recorded std_msgs/String /experiment/control message (bags from before
-    the service); RequestError saying what is wrong."""
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise RequestError(f"not JSON: {error}") from error
-    if not isinstance(data, dict):
-        raise RequestError("not a JSON object")
-    unknown = sorted(set(data) - {f.name for f in dataclasses.fields(PlanRequest)})
-    if unknown:
-        raise RequestError(f"unknown field(s) {unknown}")
-    return request_from_fields(
-        data.get("action"),
-        data.get("level"),
-        data.get("after_k"),
-        data.get("reason", ""),
-        data.get("more", False),
-    )
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ watch, and every endpoint counted for the flow report and the barrier. A node mo
 
         def __init__(self, argv: Sequence[str] | None = None) -> None:
             super().__init__(self.NODE_NAME, self.PARAMETERS, argv)
-            self.segment_pub = self.create_publisher(String, "/experiment/segment", EVENTS_QOS)
+            topic = EXPERIMENT_SEGMENT
+            self.segment_pub = self.create_publisher(SegmentEvent, topic.name, topic_qos(topic))
             self.create_timer(1.0 / self.get_parameter("fs").value, self.tick)
 
     def main(argv=None) -> int:

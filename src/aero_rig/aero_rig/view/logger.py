@@ -394,6 +394,9 @@ class RigViewLogger:
         self.counts["model"] += 1
         model = model_from_message(msg)  # ValueError naming the topic
         stamp = model.get(mm.STAMP_NS)
+        header = getattr(msg, "header", None)  # IdentificationModel: the fit's last sample
+        if not isinstance(stamp, int | float) and header is not None:
+            stamp = stamp_to_ns(header.stamp) or None
         self._set_time(int(stamp) if isinstance(stamp, int | float) else None)
         topic = IDENTIFICATION_MODEL.name
         for field, problem in mm.problems(model):
