@@ -11,7 +11,8 @@ STAMP  := $(VENV)/.installed
 INTERFACES := $(VENV)/.interfaces
 IFACE_DIR := src/aero_rig_interfaces
 IFACE_FILES := $(wildcard $(IFACE_DIR)/msg/*.msg $(IFACE_DIR)/srv/*.srv) $(IFACE_DIR)/CMakeLists.txt \
-  $(IFACE_DIR)/package.xml $(IFACE_DIR)/build_in_venv.sh $(IFACE_DIR)/cmake/wheel_include_dirs.cmake
+  $(IFACE_DIR)/package.xml $(IFACE_DIR)/build_in_venv.sh $(IFACE_DIR)/requirements-build.txt \
+  $(IFACE_DIR)/cmake/wheel_include_dirs.cmake
 PACKAGES := rig_runtime rig_testing multisine_gen pitch_actuator pressure_scanner wing_sim aero_identification aero_rig
 PKG_FILES := $(foreach p,$(PACKAGES),src/$(p)/setup.py src/$(p)/package.xml)
 

