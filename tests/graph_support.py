@@ -8,7 +8,8 @@ import subprocess
 import sys
 import time
 from collections import defaultdict
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,8 +21,9 @@ from aero_rig.verdict import STREAM_TOPICS
 from multisine_gen.campaigns import build_plan
 from multisine_gen.plan import ExperimentPlan
 from rig_runtime.barrier import ReadinessReport
-from rig_runtime.graph import package_share
+from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import DIAGNOSTICS, GRAPH_READY, PITCH_COMMAND
+from rig_runtime.launcher import Launcher
 from rig_runtime.messages import stamp_to_ns
 from rig_runtime.node import CdrSubscription, Node
 from rig_testing.netlab import NetLab
@@ -352,3 +354,55 @@ def assert_lossless_and_identical(run: Path, reference: Path) -> None:
             assert sign not in text, f"{log.name}: {sign!r}"
     for name in ("table1_all_levels.md", "table1_level1.md"):
         assert (run / name).read_bytes() == (reference / name).read_bytes(), name
+
+
+ROS2 = Path(sys.executable).parent / "ros2"
+SIM_NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]
+
+
+class Ros2Graph:
+    """A running graph and the real ``ros2`` command in its environment."""
+
+    def __init__(self, env: dict[str, str]) -> None:
+        self.env = env
+
+    def ros2(self, *args: str, timeout: float = 60.0) -> str:
+        """Run ``ros2 ARGS``: its output (stdout, then stderr, where ros2 param set reports a
+        refusal), or an assertion error if it failed."""
+        proc = subprocess.run(
+            [str(ROS2), *args], env=self.env, capture_output=True, text=True, timeout=timeout
+        )
+        assert proc.returncode == 0, (args, proc.returncode, proc.stdout, proc.stderr[-2000:])
+        return proc.stdout + proc.stderr
+
+
+@contextmanager
+def sim_graph_for_ros2(
+    env: dict[str, str], tmp: Path, generator: dict[str, Any]
+) -> Iterator[Ros2Graph]:
+    """`aero-rig run sim`'s graph as rclpy node processes, with ``generator`` overrides, once
+    the ros2 daemon of its domain lists all six nodes (as a user's first ros2 command starts
+    it; every later command reads the graph it holds). Stops the daemon and the graph."""
+    sim = load_graph(package_share("aero_rig") / "config" / "sim.yaml")
+    overrides: dict[str, dict[str, Any]] = {
+        "generator": generator,
+        "identifier": {"output_dir": str(tmp / "run"), "use_worker": False, "scan": False},
+        "recorder": {"output": str(tmp / "run" / "bag")},
+    }
+    launcher = Launcher(sim, env=env, overrides=overrides, log_dir=tmp / "logs")
+    running = Ros2Graph(env)
+    launcher.start()
+    try:
+        running.ros2("daemon", "start")
+        deadline = time.monotonic() + 90.0
+        listed: list[str] = []
+        while time.monotonic() < deadline and listed != SIM_NODES:
+            assert launcher.poll() is None, launcher.failure
+            listed = sorted(running.ros2("node", "list").split())
+        assert listed == SIM_NODES, listed
+        yield running
+    finally:
+        try:
+            running.ros2("daemon", "stop")
+        finally:
+            launcher.stop()

@@ -10,22 +10,17 @@ import re
 import select
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
-from pathlib import Path
-from typing import Any
 
 import pytest
+from graph_support import ROS2, Ros2Graph, sim_graph_for_ros2
+from graph_support import SIM_NODES as NODES
 
-from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import PITCH_COMMAND
-from rig_runtime.launcher import Launcher
 from rig_runtime.qos import resolve_qos
 from rig_testing.processes import graph_env
 
-ROS2 = Path(sys.executable).parent / "ros2"
-NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]
 pytestmark = [
     pytest.mark.ci_required,
     pytest.mark.skipif(
@@ -36,60 +31,21 @@ pytestmark = [
 ]
 
 
-class RunningGraph:
-    def __init__(self, env: dict[str, str], launcher: Launcher) -> None:
-        self.env = env
-        self.launcher = launcher
-
-    def ros2(self, *args: str, timeout: float = 60.0) -> str:
-        """Run ``ros2 ARGS``: its output (stdout, then stderr, where ros2 param set reports a
-        refusal), or an assertion error if it failed."""
-        proc = subprocess.run(
-            [str(ROS2), *args], env=self.env, capture_output=True, text=True, timeout=timeout
-        )
-        assert proc.returncode == 0, (args, proc.returncode, proc.stdout, proc.stderr[-2000:])
-        return proc.stdout + proc.stderr
-
-
 @pytest.fixture(scope="module")
-def graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningGraph]:
-    """The sim graph, as rclpy node processes."""
-    env = graph_env()
-    tmp = tmp_path_factory.mktemp("ros2cli")
-    sim = load_graph(package_share("aero_rig") / "config" / "sim.yaml")
-    overrides: dict[str, dict[str, Any]] = {
-        "generator": {"plan": "default", "real_time_factor": 1.0, "start_timeout_s": 120.0},
-        "identifier": {"output_dir": str(tmp / "run"), "use_worker": False, "scan": False},
-        "recorder": {"output": str(tmp / "run" / "bag")},
-    }
-    launcher = Launcher(sim, env=env, overrides=overrides, log_dir=tmp / "logs")
-    running = RunningGraph(env, launcher)
-    launcher.start()
-    try:
-        # The ros2 daemon of this domain, as a user's first ros2 command starts it; it holds
-        # the graph that every later command reads. Waiting here is for its discovery.
-        running.ros2("daemon", "start")
-        deadline = time.monotonic() + 90.0
-        listed: list[str] = []
-        while time.monotonic() < deadline and listed != NODES:
-            assert launcher.poll() is None, launcher.failure
-            listed = sorted(running.ros2("node", "list").split())
-        assert listed == NODES, listed
-        yield running
-    finally:
-        try:
-            running.ros2("daemon", "stop")
-        finally:
-            launcher.stop()
+def graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Ros2Graph]:
+    """The sim graph, as rclpy node processes: the default plan in real time."""
+    generator = {"plan": "default", "real_time_factor": 1.0, "start_timeout_s": 120.0}
+    with sim_graph_for_ros2(graph_env(), tmp_path_factory.mktemp("ros2cli"), generator) as g:
+        yield g
 
 
-def test_node_list_shows_the_six_nodes_every_time(graph: RunningGraph) -> None:
+def test_node_list_shows_the_six_nodes_every_time(graph: Ros2Graph) -> None:
     """As a user types it (the daemon, its default spin time), ten times in a row."""
     for _ in range(10):
         assert sorted(graph.ros2("node", "list").split()) == NODES
 
 
-def test_node_info_shows_the_generator_s_endpoints(graph: RunningGraph) -> None:
+def test_node_info_shows_the_generator_s_endpoints(graph: Ros2Graph) -> None:
     info = graph.ros2("node", "info", "/generator")
     publishers = info.split("Publishers:")[1].split("Service Servers:")[0]
     subscribers = info.split("Subscribers:")[1].split("Publishers:")[0]
@@ -100,14 +56,14 @@ def test_node_info_shows_the_generator_s_endpoints(graph: RunningGraph) -> None:
     assert "/wing/coefficients:" not in subscribers, info
 
 
-def test_topic_list_with_types(graph: RunningGraph) -> None:
+def test_topic_list_with_types(graph: Ros2Graph) -> None:
     listed = graph.ros2("topic", "list", "-t")
     assert "/pitch/command [sensor_msgs/msg/JointState]" in listed
     assert "/pressure/taps [sensor_msgs/msg/PointCloud2]" in listed
     assert "/wing/coefficients [geometry_msgs/msg/Vector3Stamped]" in listed
 
 
-def test_topic_info_qos_is_the_interface_s(graph: RunningGraph) -> None:
+def test_topic_info_qos_is_the_interface_s(graph: Ros2Graph) -> None:
     info = graph.ros2("topic", "info", "-v", PITCH_COMMAND.name)
     blocks = info.split("Node name: ")[1:]
     by_node = {b.split("\n", 1)[0].strip(): b for b in blocks}
@@ -120,7 +76,7 @@ def test_topic_info_qos_is_the_interface_s(graph: RunningGraph) -> None:
         assert f"Durability: {durability}" in block, block
 
 
-def test_topic_hz_of_the_taps_is_200_hz(graph: RunningGraph) -> None:
+def test_topic_hz_of_the_taps_is_200_hz(graph: Ros2Graph) -> None:
     proc = subprocess.Popen(
         [str(ROS2), "topic", "hz", "/pressure/taps", "--window", "400"],
         env=graph.env,
@@ -150,12 +106,12 @@ def test_topic_hz_of_the_taps_is_200_hz(graph: RunningGraph) -> None:
     assert 190.0 <= rates[-1] <= 210.0, "".join(lines)
 
 
-def test_topic_echo_once(graph: RunningGraph) -> None:
+def test_topic_echo_once(graph: Ros2Graph) -> None:
     out = graph.ros2("topic", "echo", "--once", "/wing/coefficients")
     assert "header:" in out and re.search(r"x: -?[0-9.e-]+", out), out
 
 
-def test_param_list_get_describe_set(graph: RunningGraph) -> None:
+def test_param_list_get_describe_set(graph: Ros2Graph) -> None:
     listed = graph.ros2("param", "list", "/generator")
     for name in ("plan", "real_time_factor", "max_deg", "barrier_nodes"):
         assert f"  {name}\n" in listed, listed

@@ -15,11 +15,10 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
+from graph_support import ROS2, Ros2Graph, sim_graph_for_ros2
 
-from rig_runtime.graph import load_graph, package_share
 from rig_runtime.interface import (
     EXPERIMENT_ANOMALY,
     EXPERIMENT_CONTROL,
@@ -29,16 +28,13 @@ from rig_runtime.interface import (
     IDENTIFICATION_MODEL,
     PITCH_STOP,
 )
-from rig_runtime.launcher import Launcher
 from rig_testing.processes import graph_env
 
-ROS2 = Path(sys.executable).parent / "ros2"
 INTERFACES = Path(__file__).resolve().parents[1] / "src" / "aero_rig_interfaces"
 TYPES = sorted(
     f"aero_rig_interfaces/{p.parent.name}/{p.stem}"
     for p in (*INTERFACES.glob("msg/*.msg"), *INTERFACES.glob("srv/*.srv"))
 )
-NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]
 pytestmark = [
     pytest.mark.ci_required,
     pytest.mark.skipif(
@@ -90,48 +86,19 @@ def test_the_package_lists_its_types() -> None:
     assert sorted(listed) == TYPES
 
 
-class RunningGraph:
-    def __init__(self, env: dict[str, str]) -> None:
-        self.env = env
-
-    def ros2(self, *args: str, timeout: float = 60.0) -> str:
-        return _ros2(self.env, *args, timeout=timeout)
-
-    def echo_once(self, topic: str, timeout: float = 120.0) -> str:
-        return self.ros2("topic", "echo", "--once", topic, timeout=timeout)
+def _echo_once(graph: Ros2Graph, topic: str, timeout: float = 120.0) -> str:
+    return graph.ros2("topic", "echo", "--once", topic, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
-def graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningGraph]:
+def graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Ros2Graph]:
     """The sim graph as rclpy node processes: the short plan in real time."""
-    env = _env()
-    tmp = tmp_path_factory.mktemp("ros2interfaces")
-    sim = load_graph(package_share("aero_rig") / "config" / "sim.yaml")
-    overrides: dict[str, dict[str, Any]] = {
-        "generator": {"plan": "short", "real_time_factor": 1.0, "start_timeout_s": 120.0},
-        "identifier": {"output_dir": str(tmp / "run"), "use_worker": False, "scan": False},
-        "recorder": {"output": str(tmp / "run" / "bag")},
-    }
-    launcher = Launcher(sim, env=env, overrides=overrides, log_dir=tmp / "logs")
-    running = RunningGraph(env)
-    launcher.start()
-    try:
-        running.ros2("daemon", "start")
-        deadline = time.monotonic() + 90.0
-        listed: list[str] = []
-        while time.monotonic() < deadline and listed != NODES:
-            assert launcher.poll() is None, launcher.failure
-            listed = sorted(running.ros2("node", "list").split())
-        assert listed == NODES, listed
-        yield running
-    finally:
-        try:
-            running.ros2("daemon", "stop")
-        finally:
-            launcher.stop()
+    generator = {"plan": "short", "real_time_factor": 1.0, "start_timeout_s": 120.0}
+    with sim_graph_for_ros2(_env(), tmp_path_factory.mktemp("ros2interfaces"), generator) as g:
+        yield g
 
 
-def test_topic_list_shows_the_rig_s_types(graph: RunningGraph) -> None:
+def test_topic_list_shows_the_rig_s_types(graph: Ros2Graph) -> None:
     listed = graph.ros2("topic", "list", "-t")
     for topic in (
         EXPERIMENT_PLAN,
@@ -144,8 +111,8 @@ def test_topic_list_shows_the_rig_s_types(graph: RunningGraph) -> None:
     assert "std_msgs/msg/String" not in listed, listed
 
 
-def test_echo_of_the_plan(graph: RunningGraph) -> None:
-    out = graph.echo_once(EXPERIMENT_PLAN.name)
+def test_echo_of_the_plan(graph: Ros2Graph) -> None:
+    out = _echo_once(graph, EXPERIMENT_PLAN.name)
     assert re.search(r"^plan_id: short$", out, re.MULTILINE), out
     assert re.search(r"^revision: 0$", out, re.MULTILINE), out
     assert re.search(r"^fs: 200\.0$", out, re.MULTILINE), out
@@ -153,25 +120,25 @@ def test_echo_of_the_plan(graph: RunningGraph) -> None:
     assert "plan_json: '{" in out, out
 
 
-def test_echo_of_a_readiness_report(graph: RunningGraph) -> None:
-    out = graph.echo_once(GRAPH_READY.name)
+def test_echo_of_a_readiness_report(graph: Ros2Graph) -> None:
+    out = _echo_once(graph, GRAPH_READY.name)
     assert re.search(r"^node: /\w+$", out, re.MULTILINE), out
     assert re.search(r"^ready: (true|false)$", out, re.MULTILINE), out
     assert re.search(r"^- topic: /", out, re.MULTILINE), out
     assert re.search(r"^  matched_count: \d+$", out, re.MULTILINE), out
 
 
-def test_echo_of_a_segment_event(graph: RunningGraph) -> None:
-    out = graph.echo_once(EXPERIMENT_SEGMENT.name)
+def test_echo_of_a_segment_event(graph: Ros2Graph) -> None:
+    out = _echo_once(graph, EXPERIMENT_SEGMENT.name)
     assert re.search(r"^event: (start|end)$", out, re.MULTILINE), out
     assert re.search(r"^kind: (ramp|settle|multisine|sine)$", out, re.MULTILINE), out
     assert re.search(r"^start_k: \d+$", out, re.MULTILINE), out
     assert re.search(r"^offset_deg: ", out, re.MULTILINE), out
 
 
-def test_echo_of_the_model(graph: RunningGraph) -> None:
+def test_echo_of_the_model(graph: Ros2Graph) -> None:
     """Latched: the first refit's model (after the first realization) once it is there."""
-    out = graph.echo_once(IDENTIFICATION_MODEL.name, timeout=240.0)
+    out = _echo_once(graph, IDENTIFICATION_MODEL.name, timeout=240.0)
     assert re.search(r"^refit: [1-9]\d*$", out, re.MULTILINE), out
     assert re.search(r"^- name: ", out, re.MULTILINE), out
     assert re.search(r"^  offset_deg: -?\d", out, re.MULTILINE), out
@@ -179,7 +146,7 @@ def test_echo_of_the_model(graph: RunningGraph) -> None:
     assert "model_json: '{" in out, out
 
 
-def test_control_service_refuses_outside_an_adaptive_run(graph: RunningGraph) -> None:
+def test_control_service_refuses_outside_an_adaptive_run(graph: Ros2Graph) -> None:
     listed = graph.ros2("service", "list", "-t")
     assert f"{EXPERIMENT_CONTROL.name} [{EXPERIMENT_CONTROL.type}]" in listed, listed
     out = graph.ros2(
@@ -193,7 +160,7 @@ def test_control_service_refuses_outside_an_adaptive_run(graph: RunningGraph) ->
     assert re.search(r"message='[^']*not an adaptive run", out), out
 
 
-def test_echo_of_an_anomaly(graph: RunningGraph) -> None:
+def test_echo_of_an_anomaly(graph: Ros2Graph) -> None:
     """A stop on /pitch/stop: the actuator holds, the commands it no longer follows are an
     anomaly (not_tracking). Last in this module: the run is not nominal after it."""
     echo = subprocess.Popen(
