@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from rosbags.highlevel import AnyReader
 
 from aero_rig.verdict import STREAM_TOPICS
@@ -357,6 +358,15 @@ def assert_lossless_and_identical(run: Path, reference: Path) -> None:
 
 
 ROS2 = Path(sys.executable).parent / "ros2"
+# The ros2 CLI tests' marks: CI must run them; elsewhere they skip, saying why.
+NEEDS_ROS2_TOOLS = [
+    pytest.mark.ci_required,
+    pytest.mark.skipif(
+        not ROS2.exists(),
+        reason="the ros2 tools are not in the venv (make test installs them from "
+        "../shared/ros2-python; absent here)",
+    ),
+]
 SIM_NODES = ["/generator", "/identifier", "/lift", "/recorder", "/sim_actuator", "/sim_wing"]
 
 

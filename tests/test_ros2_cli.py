@@ -14,21 +14,14 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from graph_support import ROS2, Ros2Graph, sim_graph_for_ros2
+from graph_support import NEEDS_ROS2_TOOLS, ROS2, Ros2Graph, sim_graph_for_ros2
 from graph_support import SIM_NODES as NODES
 
 from rig_runtime.interface import PITCH_COMMAND
 from rig_runtime.qos import resolve_qos
 from rig_testing.processes import graph_env
 
-pytestmark = [
-    pytest.mark.ci_required,
-    pytest.mark.skipif(
-        not ROS2.exists(),
-        reason="the ros2 tools are not in the venv (make test installs them from "
-        "../shared/ros2-python; absent here)",
-    ),
-]
+pytestmark = NEEDS_ROS2_TOOLS
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from graph_support import ROS2, Ros2Graph, sim_graph_for_ros2
+from graph_support import NEEDS_ROS2_TOOLS, ROS2, Ros2Graph, sim_graph_for_ros2
 
 from rig_runtime.interface import (
     EXPERIMENT_ANOMALY,
@@ -35,14 +35,7 @@ TYPES = sorted(
     f"aero_rig_interfaces/{p.parent.name}/{p.stem}"
     for p in (*INTERFACES.glob("msg/*.msg"), *INTERFACES.glob("srv/*.srv"))
 )
-pytestmark = [
-    pytest.mark.ci_required,
-    pytest.mark.skipif(
-        not ROS2.exists(),
-        reason="the ros2 tools are not in the venv (make test installs them from "
-        "../shared/ros2-python; absent here)",
-    ),
-]
+pytestmark = NEEDS_ROS2_TOOLS
 
 
 def _env() -> dict[str, str]:

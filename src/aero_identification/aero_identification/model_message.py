@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from rig_runtime.interface import IDENTIFICATION_MODEL
+from rig_runtime.json_payload import json_object
 
 from . import model_payload as msg
 
@@ -110,14 +111,4 @@ def model_from_message(msg: Any) -> dict[str, Any]:
     """The record of an ``/identification/model`` message: ``json.loads(msg.model_json)`` of an
     IdentificationModel, ``json.loads(msg.data)`` of an old std_msgs/String. ValueError naming
     the topic when it is neither or holds no JSON object."""
-    topic = IDENTIFICATION_MODEL.name
-    text = getattr(msg, "model_json", getattr(msg, "data", None))
-    if not isinstance(text, str):
-        raise ValueError(f"{topic}: not a model message ({type(msg).__name__})")
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{topic}: not JSON ({exc})") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"{topic}: expected a JSON object")
-    return value
+    return json_object(msg, "model_json", IDENTIFICATION_MODEL.name)

@@ -32,6 +32,7 @@ from multisine_gen.plan import (
 )
 from multisine_gen.sine import Sine
 from rig_runtime.interface import ActuatorLimits
+from rig_runtime.json_payload import json_object
 
 __all__ = [
     "PLAN_FORMAT",
@@ -214,14 +215,11 @@ def plan_message(
 def read_plan_message(msg: Any) -> tuple[ExperimentPlan, int]:
     """The plan and t0_ns of an `/experiment/plan` message (an ExperimentPlan; the std_msgs/String
     of a bag recorded before it; or its JSON text); PlanError when it is not one."""
-    text = msg if isinstance(msg, str) else getattr(msg, "plan_json", getattr(msg, "data", None))
-    if not isinstance(text, str):
-        raise PlanError(f"/experiment/plan: not a plan message ({type(msg).__name__})")
     try:
-        data = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise PlanError(f"/experiment/plan is not valid JSON: {error}") from error
-    if not isinstance(data, dict) or not isinstance(data.get("t0_ns"), int):
+        data = json_object(msg, "plan_json", "/experiment/plan")
+    except ValueError as error:
+        raise PlanError(str(error)) from None
+    if not isinstance(data.get("t0_ns"), int):
         raise PlanError("/experiment/plan holds no plan with an integer t0_ns")
     return plan_from_dict(data), int(data["t0_ns"])
 
@@ -313,12 +311,9 @@ def segment_event_from_message(msg: Any) -> dict[str, Any]:
     std_msgs/String recorded before SegmentEvent existed. PlanError when it is neither."""
     if hasattr(msg, "data"):
         try:
-            payload = json.loads(msg.data)
-        except json.JSONDecodeError as error:
-            raise PlanError(f"/experiment/segment is not valid JSON: {error}") from error
-        if not isinstance(payload, dict):
-            raise PlanError("/experiment/segment: not a JSON object")
-        return payload
+            return json_object(msg, "data", "/experiment/segment")
+        except ValueError as error:
+            raise PlanError(str(error)) from None
     event = str(msg.event)
     keys = _EVENT_KEYS.get(event)
     if keys is None:

@@ -3,7 +3,7 @@ published at once and whenever it changes, so that the lead starts the stream on
 member's endpoints are matched and every member is ready (never after a sleep)."""
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .barrier import Endpoint, ReadinessReport
 from .endpoints import CdrPublisher, endpoint_record
@@ -25,6 +25,7 @@ class Readiness:
         self.required_inputs: list[str] = []  # create_subscription(required=True)
         self.records: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
         self._pub: CdrPublisher | None = None
+        self._endpoint_cls: Any = None  # aero_rig_interfaces/Endpoint, once started
         self._last_report: ReadinessReport | None = None
         self._last_signature: object = None
 
@@ -70,10 +71,12 @@ class Readiness:
         # The anomaly writer exists before the node reports ready, so the barrier sees it matched
         # to the identifier and the recorder: a first anomaly record is never sent into the void.
         _ = node.anomalies
+        from aero_rig_interfaces.msg import Endpoint as EndpointMsg
         from aero_rig_interfaces.msg import ReadinessReport as ReportMsg
 
         from .qos_profiles import topic_qos
 
+        self._endpoint_cls = EndpointMsg
         self._pub = node.create_publisher(ReportMsg, GRAPH_READY.name, topic_qos(GRAPH_READY))
         self.announce()
         node.create_timer(period_s, self.announce)
@@ -88,6 +91,4 @@ class Readiness:
         report = self.report()
         if report != self._last_report:
             self._last_report = report
-            from aero_rig_interfaces.msg import Endpoint as EndpointMsg
-
-            self._pub.publish(report.to_message(self._pub.handle.msg_type, EndpointMsg))
+            self._pub.publish(report.to_message(self._pub.handle.msg_type, self._endpoint_cls))
